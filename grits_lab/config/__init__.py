@@ -1,0 +1,19 @@
+"""Typed configs loaded from YAML and validated on load."""
+
+from grits_lab.config.loading import (
+    config_fingerprint,
+    config_from_dict,
+    config_to_dict,
+    load_config,
+    load_yaml,
+    require,
+)
+
+__all__ = [
+    "config_fingerprint",
+    "config_from_dict",
+    "config_to_dict",
+    "load_config",
+    "load_yaml",
+    "require",
+]

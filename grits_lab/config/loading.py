@@ -1,0 +1,159 @@
+"""Build dataclass configs from YAML mappings, rejecting unknown keys and wrong types by name.
+
+Every component config in grits_lab is a dataclass. `config_from_dict` walks its type hints so a
+misspelled key or a string where a number belongs fails on load with one line that names the
+dotted key, instead of surfacing as a confusing error deep inside a simulation or training run.
+Range checks live in each dataclass's `__post_init__` (use `require`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import types
+import typing
+from pathlib import Path
+from typing import Any, Literal, TypeVar, Union, get_args, get_origin, get_type_hints
+
+import yaml
+
+from grits_lab.errors import ConfigError
+
+T = TypeVar("T")
+
+
+def require(condition: bool, key: str, value: Any, expectation: str) -> None:
+    """Raise ConfigError("`key` must be <expectation>. Got <value>.") unless `condition` holds."""
+    if not condition:
+        raise ConfigError(f"`{key}` must be {expectation}. Got {value!r}.")
+
+
+def load_yaml(path: str | Path) -> dict[str, Any]:
+    """Read a YAML mapping; missing files and syntax errors become one-line ConfigErrors."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config file not found: {path}")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1})" if mark is not None else ""
+        raise ConfigError(f"{path}: invalid YAML{where}: {getattr(exc, 'problem', exc)}") from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: top level must be a mapping, got {type(data).__name__}")
+    return data
+
+
+def load_config(path: str | Path, cls: type[T]) -> T:
+    """Load the YAML file at `path` into the dataclass `cls`, validating every key."""
+    data = load_yaml(path)
+    try:
+        return config_from_dict(cls, data)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+
+
+def config_from_dict(cls: type[T], data: Any, prefix: str = "") -> T:
+    """Recursively build dataclass `cls` from a mapping; `prefix` is the dotted key path so far."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"`{prefix or cls.__name__}` must be a mapping. Got {data!r}.")
+    hints = get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        key = f"{prefix}.{unknown[0]}" if prefix else unknown[0]
+        raise ConfigError(
+            f"unknown key `{key}`; valid keys here: {', '.join(sorted(fields))}"
+        )
+    kwargs = {}
+    for name, value in data.items():
+        key = f"{prefix}.{name}" if prefix else name
+        kwargs[name] = _coerce(hints[name], value, key)
+    try:
+        return cls(**kwargs)
+    except TypeError as exc:  # a required field is missing
+        raise ConfigError(f"`{prefix or cls.__name__}`: {exc}") from None
+
+
+def _coerce(tp: Any, value: Any, key: str) -> Any:
+    origin = get_origin(tp)
+    args = get_args(tp)
+    if tp is Any:
+        return value
+    if origin in (Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for arg in args:
+            if arg is type(None):
+                continue
+            try:
+                return _coerce(arg, value, key)
+            except ConfigError as exc:
+                errors.append(str(exc))
+        raise ConfigError(errors[0] if len(errors) == 1 else f"`{key}` has an invalid value {value!r}.")
+    if origin is Literal:
+        if value not in args:
+            choices = ", ".join(repr(a) for a in args)
+            raise ConfigError(f"`{key}` must be one of {choices}. Got {value!r}.")
+        return value
+    if dataclasses.is_dataclass(tp):
+        return config_from_dict(tp, value, key)
+    if origin in (list, typing.Sequence) or tp is list:
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"`{key}` must be a list. Got {value!r}.")
+        item_tp = args[0] if args else Any
+        return [_coerce(item_tp, v, f"{key}[{i}]") for i, v in enumerate(value)]
+    if origin is tuple or tp is tuple:
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"`{key}` must be a list. Got {value!r}.")
+        if args and args[-1] is not Ellipsis:
+            if len(value) != len(args):
+                raise ConfigError(f"`{key}` must have {len(args)} entries. Got {value!r}.")
+            return tuple(_coerce(a, v, f"{key}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
+        item_tp = args[0] if args else Any
+        return tuple(_coerce(item_tp, v, f"{key}[{i}]") for i, v in enumerate(value))
+    if origin is dict or tp is dict:
+        if not isinstance(value, dict):
+            raise ConfigError(f"`{key}` must be a mapping. Got {value!r}.")
+        val_tp = args[1] if len(args) == 2 else Any
+        return {k: _coerce(val_tp, v, f"{key}.{k}") for k, v in value.items()}
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"`{key}` must be true or false. Got {value!r}.")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"`{key}` must be an integer. Got {value!r}.")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"`{key}` must be a number. Got {value!r}.")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"`{key}` must be a string. Got {value!r}.")
+        return value
+    return value
+
+
+def config_to_dict(config: Any) -> Any:
+    """Plain-YAML form of a config (dataclasses to dicts, tuples to lists)."""
+    if dataclasses.is_dataclass(config):
+        return {f.name: config_to_dict(getattr(config, f.name)) for f in dataclasses.fields(config)}
+    if isinstance(config, (list, tuple)):
+        return [config_to_dict(v) for v in config]
+    if isinstance(config, dict):
+        return {k: config_to_dict(v) for k, v in config.items()}
+    if isinstance(config, Path):
+        return str(config)
+    return config
+
+
+def config_fingerprint(config: Any) -> str:
+    """A short stable hash of a config, used to tell whether stored outputs match it."""
+    text = json.dumps(config_to_dict(config), sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]

@@ -1,0 +1,110 @@
+"""On-disk dataset format (version 1): one compressed .npz per episode plus a rebuildable Parquet index.
+
+Layout of a dataset directory::
+
+    dataset.yaml          manifest: format_version, kind ("demos" or "spillage"), the collection
+                          config and its fingerprint
+    episodes/<id>.npz     one episode; arrays plus a `meta` entry holding a JSON object
+    index.parquet         one row per episode: the scalar entries of each episode's meta
+
+Episode files are written atomically (temporary file + rename), so an interrupted collection
+leaves only whole episodes; the index is always rebuilt from what is on disk, never trusted.
+Composite point clouds store objects in the order of `CLOUD_OBJECTS`.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+from grits_lab.errors import StorageError
+from grits_lab.io import save_npz_atomic, save_parquet_atomic
+
+FORMAT_VERSION = 1
+MANIFEST_FILE = "dataset.yaml"
+INDEX_FILE = "index.parquet"
+EPISODE_DIR = "episodes"
+CLOUD_OBJECTS = ("food", "spoon", "bowl")
+
+
+def episode_path(dataset_dir: str | Path, episode_id: str) -> Path:
+    return Path(dataset_dir) / EPISODE_DIR / f"{episode_id}.npz"
+
+
+def write_episode(dataset_dir: str | Path, episode_id: str, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> Path:
+    """Write one episode atomically; `meta` must be JSON-serializable and carry `episode_id`."""
+    if "meta" in arrays:
+        raise ValueError("`meta` is reserved for the episode metadata")
+    meta = {"episode_id": episode_id, "format_version": FORMAT_VERSION, **meta}
+    path = episode_path(dataset_dir, episode_id)
+    save_npz_atomic(path, **arrays, meta=np.array(json.dumps(meta, default=_json_default)))
+    return path
+
+
+def read_episode(path: str | Path, keys: Iterable[str] | None = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Load an episode's arrays (all, or only `keys`) and its meta; a damaged file raises StorageError."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            meta = json.loads(str(data["meta"]))
+            names = [k for k in data.files if k != "meta"] if keys is None else list(keys)
+            arrays = {k: data[k] for k in names}
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError, json.JSONDecodeError) as exc:
+        raise StorageError(f"corrupted or unreadable episode file {path}: {exc}") from None
+    return arrays, meta
+
+
+def read_meta(path: str | Path) -> dict[str, Any]:
+    return read_episode(path, keys=())[1]
+
+
+def list_episode_files(dataset_dir: str | Path) -> list[Path]:
+    return sorted((Path(dataset_dir) / EPISODE_DIR).glob("*.npz"))
+
+
+def rebuild_index(dataset_dir: str | Path, on_corrupt: str = "raise") -> "Any":
+    """Scan the episode files, write index.parquet atomically and return it as a DataFrame.
+
+    `on_corrupt`: "raise" stops at the first damaged file; "skip" leaves it out of the index
+    (the caller reports it and may regenerate it).
+    """
+    import pandas as pd
+
+    rows = []
+    for path in list_episode_files(dataset_dir):
+        try:
+            meta = read_meta(path)
+        except StorageError:
+            if on_corrupt == "raise":
+                raise
+            continue
+        row = {k: v for k, v in meta.items() if isinstance(v, (bool, int, float, str)) or v is None}
+        row["file"] = str(path.relative_to(dataset_dir))
+        rows.append(row)
+    frame = pd.DataFrame(rows)
+    save_parquet_atomic(Path(dataset_dir) / INDEX_FILE, frame)
+    return frame
+
+
+def load_index(dataset_dir: str | Path) -> "Any":
+    """The dataset's index; rebuilt from the episode files when missing."""
+    import pandas as pd
+
+    path = Path(dataset_dir) / INDEX_FILE
+    if not Path(dataset_dir).is_dir():
+        raise StorageError(f"dataset directory not found: {dataset_dir}")
+    if not path.exists():
+        return rebuild_index(dataset_dir)
+    return pd.read_parquet(path)
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON-serializable: {type(value).__name__}")

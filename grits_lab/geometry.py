@@ -1,0 +1,89 @@
+"""Rotation conversions for the 9-D action (xyz + 6-D rotation) used by every policy and dataset.
+
+The 6-D rotation is the first two columns of the rotation matrix, stacked column by column:
+[R00, R10, R20, R01, R11, R21] (Zhou et al., 2019). It is continuous, unlike quaternions or
+Euler angles, which is why diffusion policies regress it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def quat_to_matrix(quat_xyzw: np.ndarray) -> np.ndarray:
+    """(..., 4) quaternions x, y, z, w -> (..., 3, 3) rotation matrices."""
+    q = np.asarray(quat_xyzw, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    x, y, z, w = np.moveaxis(q, -1, 0)
+    m = np.empty(q.shape[:-1] + (3, 3))
+    m[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    m[..., 0, 1] = 2 * (x * y - z * w)
+    m[..., 0, 2] = 2 * (x * z + y * w)
+    m[..., 1, 0] = 2 * (x * y + z * w)
+    m[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    m[..., 1, 2] = 2 * (y * z - x * w)
+    m[..., 2, 0] = 2 * (x * z - y * w)
+    m[..., 2, 1] = 2 * (y * z + x * w)
+    m[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return m
+
+
+def matrix_to_quat(matrix: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotation matrices -> (..., 4) quaternions x, y, z, w with w >= 0."""
+    m = np.asarray(matrix, dtype=np.float64)
+    flat = m.reshape(-1, 3, 3)
+    out = np.empty((flat.shape[0], 4))
+    for i, r in enumerate(flat):
+        trace = r[0, 0] + r[1, 1] + r[2, 2]
+        if trace > 0:
+            s = np.sqrt(trace + 1.0) * 2
+            out[i] = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, 0.25 * s]
+        elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
+            s = np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2]) * 2
+            out[i] = [0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s, (r[2, 1] - r[1, 2]) / s]
+        elif r[1, 1] > r[2, 2]:
+            s = np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2]) * 2
+            out[i] = [(r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s, (r[0, 2] - r[2, 0]) / s]
+        else:
+            s = np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2
+            out[i] = [(r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s, (r[1, 0] - r[0, 1]) / s]
+    out[out[:, 3] < 0] *= -1
+    out /= np.linalg.norm(out, axis=-1, keepdims=True)
+    return out.reshape(m.shape[:-2] + (4,))
+
+
+def matrix_to_rot6d(matrix: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) -> (..., 6): the first two columns, column by column."""
+    m = np.asarray(matrix, dtype=np.float64)
+    return np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1)
+
+
+def rot6d_to_matrix(rot6d: np.ndarray) -> np.ndarray:
+    """(..., 6) -> (..., 3, 3) by Gram-Schmidt, so any 6-vector (e.g. a noisy sample) maps to a rotation."""
+    r = np.asarray(rot6d, dtype=np.float64)
+    a1, a2 = r[..., 0:3], r[..., 3:6]
+    b1 = a1 / np.clip(np.linalg.norm(a1, axis=-1, keepdims=True), 1e-9, None)
+    a2 = a2 - np.sum(b1 * a2, axis=-1, keepdims=True) * b1
+    b2 = a2 / np.clip(np.linalg.norm(a2, axis=-1, keepdims=True), 1e-9, None)
+    b3 = np.cross(b1, b2)
+    return np.stack([b1, b2, b3], axis=-1)
+
+
+def quat_to_rot6d(quat_xyzw: np.ndarray) -> np.ndarray:
+    return matrix_to_rot6d(quat_to_matrix(quat_xyzw))
+
+
+def rot6d_to_quat(rot6d: np.ndarray) -> np.ndarray:
+    return matrix_to_quat(rot6d_to_matrix(rot6d))
+
+
+def pose7_to_pose9(pose7: np.ndarray) -> np.ndarray:
+    """(..., 7) xyz + quaternion xyzw -> (..., 9) xyz + 6-D rotation."""
+    p = np.asarray(pose7, dtype=np.float64)
+    return np.concatenate([p[..., :3], quat_to_rot6d(p[..., 3:7])], axis=-1)
+
+
+def pose9_to_pose7(pose9: np.ndarray) -> np.ndarray:
+    """(..., 9) xyz + 6-D rotation -> (..., 7) xyz + quaternion xyzw."""
+    p = np.asarray(pose9, dtype=np.float64)
+    return np.concatenate([p[..., :3], rot6d_to_quat(p[..., 3:9])], axis=-1)

@@ -1,0 +1,34 @@
+"""The evaluation episode record: one row per (method, food, level, trial), the unit every report reads.
+
+Evaluation (`grits-lab evaluate`) and sweeps write these rows to Parquet; the report layer reads
+them and never recomputes a metric. Boolean outcome columns may overlap (a trial can spill and
+still fail to scoop), as in the paper.
+"""
+
+from __future__ import annotations
+
+# name -> meaning. Every evaluation record has at least these columns.
+RECORD_COLUMNS: dict[str, str] = {
+    "run_id": "identifier of the evaluation or sweep run that produced the row",
+    "method": "method name, e.g. rule_based, bc, scone, dp, dp_post, grits, grits_raw, grits_pointnet2",
+    "food": "food name from the food library, e.g. sago",
+    "split": "train or unseen",
+    "level": "quantity level name, e.g. low or high",
+    "trial": "trial index within (food, level), 0-based",
+    "seed": "episode seed, derived from (root seed, food, level, trial); the same for every method",
+    "task_success": "bool: scooped and transferred to the target bowl without spillage",
+    "spillage": "bool: food spilled during scooping",
+    "scoop_failure": "bool: nothing, or too little, lifted in the spoon",
+    "scoop_success": "bool: lifted at least one large item or covered one third of the spoon",
+    "spilled_before_scoop": "bool: spillage at any point before the scoop completed (paper Fig. 6)",
+    "n_particles": "int: particles in the source bowl at the start",
+    "spilled": "int: particles spilled during scooping",
+    "scooped": "int: particles in the spoon when the scoop completed",
+    "transferred": "int: particles that reached the target bowl",
+    "rho": "float: guidance weight (NaN for methods without guidance)",
+    "s": "int: guidance threshold on the training-step scale (-1 without guidance)",
+    "error": "str: empty, or the error that ended the episode (such rows count as failures)",
+    "wall_time_s": "float: wall-clock seconds for the episode",
+}
+
+OUTCOME_COLUMNS = ("task_success", "spillage", "scoop_failure")
