@@ -1,0 +1,72 @@
+"""Config loading rejects bad input by key name; valid input round-trips."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal, Optional
+
+import pytest
+
+from grits_lab.config import config_fingerprint, config_from_dict, config_to_dict, load_config, require
+from grits_lab.errors import ConfigError
+
+
+@dataclasses.dataclass
+class InnerConfig:
+    count: int = 3
+    ratio: float = 0.5
+
+    def __post_init__(self):
+        require(self.count > 0, "count", self.count, "a positive integer")
+
+
+@dataclasses.dataclass
+class OuterConfig:
+    name: str = "x"
+    mode: Literal["fast", "slow"] = "fast"
+    inner: InnerConfig = dataclasses.field(default_factory=InnerConfig)
+    sizes: tuple[int, ...] = (1, 2)
+    address: Optional[str] = None
+
+
+def test_valid_mapping_builds_nested_dataclasses():
+    cfg = config_from_dict(OuterConfig, {"mode": "slow", "inner": {"count": 7, "ratio": 1}, "sizes": [4, 5]})
+    assert cfg.mode == "slow" and cfg.inner.count == 7 and cfg.inner.ratio == 1.0 and cfg.sizes == (4, 5)
+    assert config_from_dict(OuterConfig, config_to_dict(cfg)) == cfg
+
+
+@pytest.mark.parametrize(
+    "data, fragment",
+    [
+        ({"inner": {"cuont": 1}}, "unknown key `inner.cuont`"),
+        ({"inner": {"count": "three"}}, "`inner.count` must be an integer"),
+        ({"inner": {"count": -1}}, "`count` must be a positive integer. Got -1."),
+        ({"mode": "medium"}, "`mode` must be one of 'fast', 'slow'"),
+        ({"sizes": [1, "a"]}, "`sizes[1]` must be an integer"),
+        ({"inner": 5}, "`inner` must be a mapping"),
+        ({"name": True}, "`name` must be a string"),
+    ],
+)
+def test_bad_values_name_the_key(data, fragment):
+    with pytest.raises(ConfigError) as info:
+        config_from_dict(OuterConfig, data)
+    assert fragment in str(info.value)
+
+
+def test_load_config_reports_file_and_yaml_errors(tmp_path):
+    with pytest.raises(ConfigError, match="config file not found"):
+        load_config(tmp_path / "missing.yaml", OuterConfig)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("inner: [1, 2\n")
+    with pytest.raises(ConfigError, match="invalid YAML"):
+        load_config(bad, OuterConfig)
+    wrong = tmp_path / "wrong.yaml"
+    wrong.write_text("inner:\n  count: 0\n")
+    with pytest.raises(ConfigError, match=r"wrong.yaml: `count` must be a positive integer"):
+        load_config(wrong, OuterConfig)
+
+
+def test_fingerprint_changes_with_values_only():
+    a, b = OuterConfig(), OuterConfig()
+    assert config_fingerprint(a) == config_fingerprint(b)
+    assert config_fingerprint(a) != config_fingerprint(OuterConfig(name="y"))

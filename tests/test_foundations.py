@@ -1,0 +1,92 @@
+"""Rotation conversions, derived seeds, atomic writes and the episode file format."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grits_lab.data.format import read_episode, rebuild_index, write_episode
+from grits_lab.errors import StorageError
+from grits_lab.geometry import (
+    matrix_to_rot6d,
+    pose7_to_pose9,
+    pose9_to_pose7,
+    quat_to_matrix,
+    rot6d_to_matrix,
+)
+from grits_lab.io import ensure_writable_dir, write_text_atomic
+from grits_lab.seeding import derive_seed
+
+
+def _random_quats(n, seed=0):
+    q = np.random.default_rng(seed).normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[q[:, 3] < 0] *= -1
+    return q
+
+
+def test_pose_round_trip_and_orthonormality():
+    pose7 = np.concatenate([np.random.default_rng(1).normal(size=(50, 3)), _random_quats(50)], axis=1)
+    np.testing.assert_allclose(pose9_to_pose7(pose7_to_pose9(pose7)), pose7, atol=1e-9)
+    m = quat_to_matrix(pose7[:, 3:])
+    np.testing.assert_allclose(m @ np.swapaxes(m, 1, 2), np.broadcast_to(np.eye(3), m.shape), atol=1e-9)
+    np.testing.assert_allclose(np.linalg.det(m), 1.0, atol=1e-9)
+
+
+def test_rot6d_projects_noisy_vectors_to_rotations():
+    noisy = matrix_to_rot6d(quat_to_matrix(_random_quats(20))) + 0.1 * np.random.default_rng(2).normal(size=(20, 6))
+    m = rot6d_to_matrix(noisy)
+    np.testing.assert_allclose(np.linalg.det(m), 1.0, atol=1e-9)
+    # the first column keeps the direction of the first three numbers
+    cos = np.sum(m[:, :, 0] * noisy[:, :3], axis=1) / np.linalg.norm(noisy[:, :3], axis=1)
+    np.testing.assert_allclose(cos, 1.0, atol=1e-9)
+
+
+def test_derived_seeds_are_stable_and_distinct():
+    assert derive_seed(0, "sago", "low", 3) == derive_seed(0, "sago", "low", 3)
+    seeds = {derive_seed(0, food, level, i) for food in ("sago", "penne") for level in ("low", "high") for i in range(50)}
+    assert len(seeds) == 200
+    assert derive_seed(1, "sago", "low", 3) != derive_seed(0, "sago", "low", 3)
+    assert 0 <= derive_seed(123, "x") < 2**31
+
+
+def test_episode_round_trip_and_index(tmp_path):
+    traj = np.arange(27, dtype=np.float32).reshape(3, 9)
+    write_episode(tmp_path, "ep_000001", {"trajectory": traj}, {"food": "sago", "label": 1})
+    write_episode(tmp_path, "ep_000000", {"trajectory": traj * 2}, {"food": "penne", "label": 0})
+    arrays, meta = read_episode(tmp_path / "episodes" / "ep_000001.npz")
+    np.testing.assert_array_equal(arrays["trajectory"], traj)
+    assert meta["food"] == "sago" and meta["episode_id"] == "ep_000001"
+    index = rebuild_index(tmp_path)
+    assert list(index["episode_id"]) == ["ep_000000", "ep_000001"]
+    assert not [p for p in (tmp_path / "episodes").iterdir() if p.name.startswith(".")]
+
+
+def test_corrupted_episode_is_detected(tmp_path):
+    write_episode(tmp_path, "ep_a", {"x": np.zeros(3)}, {})
+    path = tmp_path / "episodes" / "ep_a.npz"
+    path.write_bytes(path.read_bytes()[:40])
+    with pytest.raises(StorageError, match="corrupted or unreadable episode file"):
+        read_episode(path)
+    assert rebuild_index(tmp_path, on_corrupt="skip").empty
+
+
+def _unwritable_dir(tmp_path):
+    """A directory nobody may write to: /sys refuses even root; chmod works for other users."""
+    if os.geteuid() == 0:
+        return Path("/sys/grits_lab_unwritable")
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    return locked / "sub"
+
+
+def test_unwritable_directory_gives_clear_error(tmp_path):
+    target = _unwritable_dir(tmp_path)
+    with pytest.raises(StorageError, match="permission denied or read-only"):
+        ensure_writable_dir(target)
+    with pytest.raises(StorageError, match="cannot write"):
+        write_text_atomic(target / "f.txt", "x")
