@@ -1,0 +1,211 @@
+"""The Ray executor: a pool of actors, each holding one simulator, fed specs with a bounded number in flight.
+
+Sizing. Each actor reserves `cpus_per_worker` CPUs (default 1) for its whole life, and the
+executor starts no more actors than the cluster's CPUs can hold, so every actor is scheduled and
+no work is left waiting for a CPU an actor will never release (on a 2-core machine two 1-CPU
+actors take both CPUs: that is safe here because all work runs *in* the actors; the executor never
+submits plain Ray tasks). Episodes are pure CPU, one thread each, so one actor per core is the
+right size; the driver only waits and writes files.
+
+Faults. A spec whose actor dies (kill -9, node lost, out of memory) is re-run from its seed on a
+replacement actor, up to `max_attempts` runs; a spec whose work function raises comes back as a
+failed result with its error (the worker catches it), and the job goes on.
+
+Where Ray runs: an explicit `address`, else the RAY_ADDRESS environment variable, else a local
+Ray started here and sized to the machine. If Ray is already initialized in this process (tests,
+notebooks) it is used as is and left running on close.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import math
+import os
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import ray
+from ray.exceptions import GetTimeoutError, RayActorError
+
+from grits_lab.errors import GritsError
+from grits_lab.runners.base import Executor
+from grits_lab.runners.spec import EpisodeResult, EpisodeSpec
+from grits_lab.runners.work import WorkerContext, execute_spec, resolve_work_path
+
+log = logging.getLogger(__name__)
+
+try:  # newer Ray raises this while an actor is restarting or unreachable
+    from ray.exceptions import ActorUnavailableError
+except ImportError:  # pragma: no cover - older Ray
+    ActorUnavailableError = RayActorError
+
+_LOST_WORKER = (RayActorError, ActorUnavailableError)
+
+
+class _EpisodeWorker:
+    """Actor body: one WorkerContext (so one simulator) per actor process."""
+
+    def __init__(self, worker_index: int):
+        self._context = WorkerContext(worker_index)
+
+    def pid(self) -> int:
+        return os.getpid()
+
+    def run(self, spec: EpisodeSpec) -> EpisodeResult:
+        result = execute_spec(spec, self._context)
+        result.spec = None  # the driver still has it; do not ship trajectories back
+        return result
+
+
+@dataclass
+class _Slot:
+    actor: Any
+    generation: int
+    in_flight: int = 0
+
+
+class RayExecutor(Executor):
+    """Actors each holding one simulator; results streamed with `ray.wait`.
+
+    workers: number of actors (None: as many as the cluster's CPUs allow).
+    address: Ray cluster address ("auto", "ray://host:10001", "host:6379"); None uses RAY_ADDRESS
+        or starts a local Ray with `num_cpus` CPUs (None: this machine's core count).
+    cpus_per_worker: CPUs each actor reserves.
+    max_in_flight_per_worker: specs queued on each actor at once; 1 keeps a killed worker from
+        taking queued specs down with it, 2 hides the driver's round trip for very short episodes.
+    max_attempts: runs of a spec before a lost worker marks it failed.
+    runtime_env: passed to ray.init when connecting (e.g. {"working_dir": "."} for a cluster whose
+        nodes do not have grits_lab installed).
+    """
+
+    def __init__(
+        self,
+        workers: int | None = None,
+        address: str | None = None,
+        num_cpus: int | None = None,
+        cpus_per_worker: float = 1.0,
+        max_in_flight_per_worker: int = 1,
+        max_attempts: int = 3,
+        runtime_env: dict[str, Any] | None = None,
+        startup_timeout_s: float = 120.0,
+    ):
+        self._owns_ray = False
+        if not ray.is_initialized():
+            address = address or os.environ.get("RAY_ADDRESS") or None
+            kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": logging.WARNING}
+            if runtime_env:
+                kwargs["runtime_env"] = runtime_env
+            if address:
+                ray.init(address=address, **kwargs)
+            else:
+                ray.init(num_cpus=num_cpus or os.cpu_count() or 1, **kwargs)
+            self._owns_ray = True
+        cluster_cpus = float(ray.cluster_resources().get("CPU", 0.0))
+        fit = int(math.floor(cluster_cpus / cpus_per_worker + 1e-9))
+        if fit < 1:
+            raise GritsError(
+                f"the Ray cluster has {cluster_cpus:g} CPUs, fewer than cpus_per_worker={cpus_per_worker:g}"
+            )
+        if workers is not None and workers > fit:
+            # More actors than CPUs would leave some unscheduled forever: wait on them = deadlock.
+            log.warning("asked for %d workers but the cluster fits %d (%g CPUs); using %d", workers, fit, cluster_cpus, fit)
+        self.num_workers = min(workers or fit, fit)
+        self.cpus_per_worker = cpus_per_worker
+        self.max_in_flight_per_worker = max(1, int(max_in_flight_per_worker))
+        self.max_attempts = max(1, int(max_attempts))
+        self._actor_cls = ray.remote(_EpisodeWorker)
+        self._slots = [self._start_actor(i, 0) for i in range(self.num_workers)]
+        self._queue: collections.deque[tuple[EpisodeSpec, int]] = collections.deque()
+        self._in_flight: dict[Any, tuple[int, int, EpisodeSpec, int]] = {}
+        self._ready_results: list[EpisodeResult] = []
+        try:
+            ray.get([s.actor.pid.remote() for s in self._slots], timeout=startup_timeout_s)
+        except GetTimeoutError:
+            self.close()
+            raise GritsError(
+                f"{self.num_workers} Ray workers could not start within {startup_timeout_s:g} s "
+                f"(cluster CPUs: {cluster_cpus:g}, cpus_per_worker: {cpus_per_worker:g})"
+            ) from None
+
+    def _start_actor(self, index: int, generation: int) -> _Slot:
+        actor = self._actor_cls.options(num_cpus=self.cpus_per_worker, max_restarts=0).remote(index)
+        return _Slot(actor=actor, generation=generation)
+
+    def worker_pids(self) -> list[int]:
+        """Process ids of the current actors (for monitoring, and for fault-injection tests)."""
+        return ray.get([s.actor.pid.remote() for s in self._slots])
+
+    def submit(self, spec: EpisodeSpec) -> None:
+        self._queue.append((spec.replace(work=resolve_work_path(spec.work)), 1))
+        self._dispatch()
+
+    def capacity(self) -> int:
+        total = self.num_workers * self.max_in_flight_per_worker
+        return total - len(self._in_flight) - len(self._queue)
+
+    def pending(self) -> int:
+        return len(self._in_flight) + len(self._queue) + len(self._ready_results)
+
+    def _dispatch(self) -> None:
+        for index, slot in enumerate(self._slots):
+            while self._queue and slot.in_flight < self.max_in_flight_per_worker:
+                spec, attempt = self._queue.popleft()
+                ref = slot.actor.run.remote(spec)
+                slot.in_flight += 1
+                self._in_flight[ref] = (index, slot.generation, spec, attempt)
+
+    def poll(self, timeout: float | None = None) -> list[EpisodeResult]:
+        results, self._ready_results = self._ready_results, []
+        if results or not self._in_flight:
+            return results
+        ready, _ = ray.wait(list(self._in_flight), num_returns=len(self._in_flight), timeout=0)
+        if not ready:
+            ready, _ = ray.wait(list(self._in_flight), num_returns=1, timeout=timeout)
+        for ref in ready:
+            index, generation, spec, attempt = self._in_flight.pop(ref)
+            slot = self._slots[index]
+            if slot.generation == generation:
+                slot.in_flight -= 1
+            try:
+                result: EpisodeResult = ray.get(ref)
+            except _LOST_WORKER as exc:
+                self._replace_actor(index, generation)
+                if attempt < self.max_attempts:
+                    log.warning("worker lost while running %s (attempt %d); re-running it from its seed", spec.episode_id, attempt)
+                    self._queue.appendleft((spec, attempt + 1))
+                    continue
+                result = EpisodeResult(
+                    episode_id=spec.episode_id,
+                    ok=False,
+                    error=f"WorkerLost: worker died on each of {attempt} attempts: {type(exc).__name__}",
+                    attempts=attempt,
+                )
+            result.spec = spec
+            result.attempts = attempt
+            results.append(result)
+        self._dispatch()
+        return results
+
+    def _replace_actor(self, index: int, generation: int) -> None:
+        slot = self._slots[index]
+        if slot.generation != generation:
+            return  # already replaced when another of its specs came back
+        try:
+            ray.kill(slot.actor, no_restart=True)
+        except Exception:  # already gone
+            pass
+        self._slots[index] = self._start_actor(index, generation + 1)
+
+    def close(self) -> None:
+        for slot in getattr(self, "_slots", []):
+            try:
+                ray.kill(slot.actor, no_restart=True)
+            except Exception:
+                pass
+        self._slots = []
+        self._in_flight = {}
+        if self._owns_ray and ray.is_initialized():
+            ray.shutdown()
+            self._owns_ray = False
