@@ -1,0 +1,95 @@
+"""Depth + segmentation to world-frame points, per-object point sets, and farthest-point sampling to exactly N.
+
+Camera convention (the sim's `render_cameras()`): depth is metric distance along the optical axis
+(z-depth, 0 or non-finite where invalid), `intrinsics` is the pinhole matrix K of the image in
+OpenCV axes (x right, y down, z forward), and `cam_to_world` maps those camera axes to the world.
+"""
+
+from __future__ import annotations
+
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+
+from grits_lab.seeding import make_rng
+
+
+def depth_to_points(
+    depth: np.ndarray,
+    intrinsics: np.ndarray,
+    cam_to_world: np.ndarray,
+    mask: np.ndarray | None = None,
+) -> np.ndarray:
+    """(H, W) depth -> (M, 3) world points of the valid pixels (and of `mask`, when given)."""
+    depth = np.asarray(depth, dtype=np.float64)
+    valid = np.isfinite(depth) & (depth > 0)
+    if mask is not None:
+        valid &= mask
+    v, u = np.nonzero(valid)
+    z = depth[v, u]
+    k = np.asarray(intrinsics, dtype=np.float64)
+    x = (u + 0.5 - k[0, 2]) * z / k[0, 0]
+    y = (v + 0.5 - k[1, 2]) * z / k[1, 1]
+    cam = np.stack([x, y, z], axis=1)
+    return transform_points(cam, cam_to_world)
+
+
+def transform_points(points: np.ndarray, transform: np.ndarray) -> np.ndarray:
+    """Apply a (4, 4) homogeneous transform to (M, 3) points."""
+    t = np.asarray(transform, dtype=np.float64)
+    return np.asarray(points, dtype=np.float64) @ t[:3, :3].T + t[:3, 3]
+
+
+def pose_matrix(position: Sequence[float], quat_xyzw: Sequence[float]) -> np.ndarray:
+    """(4, 4) transform of a pose given as position + quaternion x, y, z, w."""
+    from grits_lab.geometry import quat_to_matrix
+
+    m = np.eye(4)
+    m[:3, :3] = quat_to_matrix(np.asarray(quat_xyzw, dtype=np.float64))
+    m[:3, 3] = position
+    return m
+
+
+def object_points(
+    cameras: Iterable[Mapping[str, np.ndarray]],
+    body_ids: Mapping[str, int | Sequence[int]],
+    depth_key: str = "depth",
+) -> dict[str, np.ndarray]:
+    """Per-object world points, merged over all cameras, selected by the segmentation mask.
+
+    cameras: dicts with `depth_key` (H, W), "segmentation" (H, W) body ids, "intrinsics" (3, 3),
+    "cam_to_world" (4, 4). body_ids: object name -> one body id or a list (food particles).
+    """
+    cameras = list(cameras)
+    out: dict[str, list[np.ndarray]] = {name: [] for name in body_ids}
+    for cam in cameras:
+        seg = np.asarray(cam["segmentation"])
+        for name, ids in body_ids.items():
+            mask = np.isin(seg, np.atleast_1d(np.asarray(ids)))
+            if mask.any():
+                out[name].append(depth_to_points(cam[depth_key], cam["intrinsics"], cam["cam_to_world"], mask))
+    return {name: (np.concatenate(p) if p else np.zeros((0, 3))) for name, p in out.items()}
+
+
+def farthest_point_sample(points: np.ndarray, n: int, seed: int = 0, fallback: Sequence[float] | None = None) -> np.ndarray:
+    """Exactly `n` points (n, 3) float32 covering `points` (M, 3) by farthest-point sampling.
+
+    The first point is drawn from `seed`, so the sample is reproducible. With fewer than `n`
+    points, all of them are kept and the rest are repeats drawn at random (a set of points, as a
+    PointNet sees it, is unchanged by repeats). With none (object fully hidden), all `n` points
+    sit at `fallback` (e.g. the object's position), or at the origin.
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    m = len(points)
+    if m == 0:
+        where = np.zeros(3) if fallback is None else np.asarray(fallback, dtype=np.float64)
+        return np.repeat(where[None], n, axis=0).astype(np.float32)
+    rng = make_rng(seed)
+    if m <= n:
+        extra = points[rng.integers(0, m, size=n - m)]
+        return np.concatenate([points, extra]).astype(np.float32)
+    import open3d as o3d
+
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    sampled = cloud.farthest_point_down_sample(int(n), int(rng.integers(0, m)))
+    return np.asarray(sampled.points, dtype=np.float32)
