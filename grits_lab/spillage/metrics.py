@@ -1,0 +1,64 @@
+"""Binary-classifier metrics of the predictor: accuracy, AUROC and expected calibration error.
+
+Guidance follows the gradient of P(spill), so how well that probability is calibrated matters as
+much as how well it ranks; ECE is measured on P(spill) itself (reliability of the spill class).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def accuracy(prob_spill: np.ndarray, labels: np.ndarray, threshold: float = 0.5) -> float:
+    prob_spill, labels = _check(prob_spill, labels)
+    return float(np.mean((prob_spill >= threshold) == labels.astype(bool)))
+
+
+def auroc(prob_spill: np.ndarray, labels: np.ndarray) -> float:
+    """Area under the ROC curve by the rank (Mann-Whitney) statistic, ties counted half; NaN if one class is absent."""
+    prob_spill, labels = _check(prob_spill, labels)
+    pos = labels.astype(bool)
+    n_pos, n_neg = int(pos.sum()), int((~pos).sum())
+    if n_pos == 0 or n_neg == 0:
+        return float("nan")
+    order = np.argsort(prob_spill, kind="mergesort")
+    sorted_scores = prob_spill[order]
+    ranks = np.empty(len(prob_spill), dtype=np.float64)
+    # average ranks over ties
+    _, first, counts = np.unique(sorted_scores, return_index=True, return_counts=True)
+    avg = first + (counts - 1) / 2.0 + 1.0
+    ranks[order] = np.repeat(avg, counts)
+    return float((ranks[pos].sum() - n_pos * (n_pos + 1) / 2.0) / (n_pos * n_neg))
+
+
+def expected_calibration_error(prob_spill: np.ndarray, labels: np.ndarray, n_bins: int = 10) -> float:
+    """sum_b |B_b|/n * |mean P(spill) in b - spill rate in b| over equal-width bins of P(spill)."""
+    prob_spill, labels = _check(prob_spill, labels)
+    if len(prob_spill) == 0:
+        return float("nan")
+    bins = np.clip((prob_spill * n_bins).astype(int), 0, n_bins - 1)
+    total = 0.0
+    for b in range(n_bins):
+        mask = bins == b
+        if mask.any():
+            total += mask.sum() * abs(prob_spill[mask].mean() - labels[mask].mean())
+    return float(total / len(prob_spill))
+
+
+def classification_report(prob_spill: np.ndarray, labels: np.ndarray, n_bins: int = 10) -> dict[str, float]:
+    prob_spill, labels = _check(prob_spill, labels)
+    return {
+        "accuracy": accuracy(prob_spill, labels),
+        "auroc": auroc(prob_spill, labels),
+        "ece": expected_calibration_error(prob_spill, labels, n_bins),
+        "n": int(len(labels)),
+        "spill_rate": float(labels.mean()) if len(labels) else float("nan"),
+    }
+
+
+def _check(prob_spill: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    p = np.asarray(prob_spill, dtype=np.float64).reshape(-1)
+    y = np.asarray(labels, dtype=np.float64).reshape(-1)
+    if p.shape != y.shape:
+        raise ValueError(f"probabilities {p.shape} and labels {y.shape} differ in length")
+    return p, y

@@ -1,0 +1,166 @@
+"""Training and evaluation of the spillage predictor: epochs with validation metrics, checkpoints, resume.
+
+A run lives in `<output_dir>/<name>/`: `last.pt` (written after every epoch, what a resumed run
+continues from), `best.pt` (the epoch with the best validation score by `train.select_metric`),
+`history.json` (one row per epoch: loss, accuracy, AUROC, ECE on train and validation) and
+`config.yaml`. A rerun with the same config resumes after the last finished epoch; a changed
+config refuses to resume unless the run is restarted.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import yaml
+from torch.utils.data import DataLoader
+
+from grits_lab.config import config_fingerprint, config_to_dict
+from grits_lab.data.normalize import ActionNormalizer
+from grits_lab.errors import ConfigError
+from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
+from grits_lab.seeding import derive_seed
+from grits_lab.spillage.checkpoint import TrainedPredictor, read_checkpoint, save_checkpoint
+from grits_lab.spillage.config import PredictorConfig
+from grits_lab.spillage.dataset import CLOUD_KEYS, SpillageChunkDataset, check_spillage_dataset, fit_normalizers, split_episodes
+from grits_lab.spillage.metrics import classification_report
+from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
+
+
+def run_dir(config: PredictorConfig) -> Path:
+    return Path(config.output_dir) / config.name
+
+
+def _resume_fingerprint(config: PredictorConfig) -> str:
+    """Fingerprint of everything that must match to resume; `train.epochs` may grow (train longer)."""
+    described = config_to_dict(config)
+    del described["train"]["epochs"]
+    return config_fingerprint(described)
+
+
+def _loader(dataset: SpillageChunkDataset, batch_size: int) -> DataLoader:
+    # num_workers=0: the machine has two cores, and the model's own threads use them.
+    return DataLoader(dataset, batch_size=batch_size, num_workers=0)
+
+
+def predict(model: SpillagePredictor, dataset: SpillageChunkDataset, batch_size: int = 256) -> tuple[np.ndarray, np.ndarray, float]:
+    """P(spill) and labels over the dataset in its (fixed) order, and the mean cross-entropy."""
+    model.eval()
+    probs, labels, losses = [], [], []
+    with torch.no_grad():
+        for traj, cloud, label in _loader(dataset, batch_size):
+            logits = model(traj, cloud)
+            losses.append(torch.nn.functional.cross_entropy(logits, label, reduction="sum").item())
+            probs.append(torch.softmax(logits, dim=-1)[:, 1].numpy())
+            labels.append(label.numpy())
+    p = np.concatenate(probs) if probs else np.zeros(0)
+    y = np.concatenate(labels) if labels else np.zeros(0)
+    return p, y, float(sum(losses) / max(len(y), 1))
+
+
+def train_predictor(config: PredictorConfig, restart: bool = False, progress: bool = True) -> dict[str, Any]:
+    """Train (or resume) the run of `config`; returns the best epoch's validation metrics and paths."""
+    from tqdm import tqdm
+
+    torch.set_num_threads(config.train.num_threads)
+    out = ensure_writable_dir(run_dir(config))
+    last_path, best_path = out / "last.pt", out / "best.pt"
+    fingerprint = _resume_fingerprint(config)
+    dataset_dir = Path(config.data.dataset)
+    index = check_spillage_dataset(dataset_dir)
+    cloud_key = CLOUD_KEYS[config.data.cloud_source]
+    split = split_episodes(index, config.data.val_fraction, config.data.split_seed, config.data.holdout_shape)
+
+    torch.manual_seed(derive_seed(config.train.seed, "predictor-init"))
+    model = SpillagePredictor(config.model)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=config.train.lr, weight_decay=config.train.weight_decay)
+    history: list[dict[str, Any]] = []
+    start_epoch = 0
+    best_score = math.inf
+    state = read_checkpoint(last_path) if last_path.exists() and not restart else None
+    if state is not None:
+        if state.get("fingerprint") != fingerprint:
+            raise ConfigError(f"{last_path} was trained with a different config (only `train.epochs` may change on resume); pass --restart to start over")
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        action_norm = ActionNormalizer().load_state_dict(state["action_normalizer"])
+        cloud_norm = CloudNormalizer().load_state_dict(state["cloud_normalizer"])
+        history, start_epoch, best_score = state["history"], int(state["epoch"]) + 1, float(state["best_score"])
+    else:
+        action_norm, cloud_norm = fit_normalizers(dataset_dir, split.train, cloud_key, config.data.cloud_scale)
+    write_text_atomic(out / "config.yaml", yaml.safe_dump(config_to_dict(config), sort_keys=False))
+
+    common = dict(cloud_key=cloud_key, chunk_len=config.model.chunk_len, action_normalizer=action_norm, cloud_normalizer=cloud_norm, points_per_object=config.data.points_per_object, seed=config.train.seed, cache=config.data.cache_episodes)
+    train_set = SpillageChunkDataset(dataset_dir, split.train, shuffle=True, buffer_size=config.data.shuffle_buffer, **common)
+    train_eval_set = SpillageChunkDataset(dataset_dir, split.train, shuffle=False, **common)
+    train_eval_set._cache = train_set._cache  # one decoded copy of each training episode
+    val_set = SpillageChunkDataset(dataset_dir, split.val, shuffle=False, **common)
+    n_train = len(train_set.labels())
+
+    for epoch in range(start_epoch, config.train.epochs):
+        torch.manual_seed(derive_seed(config.train.seed, "dropout", epoch))
+        train_set.set_epoch(epoch)
+        model.train()
+        t0 = time.perf_counter()
+        total, seen = 0.0, 0
+        bar = tqdm(total=n_train, desc=f"epoch {epoch + 1}/{config.train.epochs}", unit="chunk", disable=not progress, leave=False)
+        for traj, cloud, label in _loader(train_set, config.train.batch_size):
+            loss = torch.nn.functional.cross_entropy(model(traj, cloud), label)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            total += loss.item() * len(label)
+            seen += len(label)
+            bar.update(len(label))
+            bar.set_postfix(loss=f"{total / seen:.4f}")
+        bar.close()
+        p_tr, y_tr, loss_tr = predict(model, train_eval_set)
+        p_va, y_va, loss_va = predict(model, val_set)
+        row = {"epoch": epoch + 1, "train_loss": loss_tr, "val_loss": loss_va, "seconds": time.perf_counter() - t0}
+        row.update({f"train_{k}": v for k, v in classification_report(p_tr, y_tr, config.train.ece_bins).items()})
+        row.update({f"val_{k}": v for k, v in classification_report(p_va, y_va, config.train.ece_bins).items()})
+        history.append(row)
+        score = loss_va if config.train.select_metric == "val_loss" else -row["val_auroc"]
+        improved = not math.isnan(score) and score < best_score
+        if improved:
+            best_score = score
+        extra = {"fingerprint": fingerprint, "optimizer": optimizer.state_dict(), "epoch": epoch, "history": history, "best_score": best_score, "split": {"train": split.train, "val": split.val}}
+        ckpt = dict(config=config, model=model, action_normalizer=action_norm, cloud_normalizer=cloud_norm)
+        if improved:
+            save_checkpoint(best_path, **ckpt, extra=extra)
+        save_checkpoint(last_path, **ckpt, extra=extra)
+        write_json_atomic(out / "history.json", history)
+        if progress:
+            print(
+                f"epoch {epoch + 1}/{config.train.epochs}  loss {loss_tr:.4f}/{loss_va:.4f}  "
+                f"acc {row['train_accuracy']:.3f}/{row['val_accuracy']:.3f}  auroc {row['val_auroc']:.3f}  "
+                f"ece {row['val_ece']:.3f}  ({row['seconds']:.1f}s){'  *' if improved else ''}",
+                flush=True,
+            )
+    best = min(history, key=lambda r: r["val_loss"] if config.train.select_metric == "val_loss" else -r["val_auroc"]) if history else {}
+    return {"run_dir": str(out), "best_checkpoint": str(best_path), "last_checkpoint": str(last_path), "best_epoch": best}
+
+
+def evaluate_predictor(predictor: TrainedPredictor, dataset_dir: str | Path, files: list[str] | None = None, n_bins: int = 10) -> dict[str, Any]:
+    """Accuracy, AUROC, ECE and loss of a trained predictor on every chunk of a (held-out) spillage dataset."""
+    dataset_dir = Path(dataset_dir)
+    index = check_spillage_dataset(dataset_dir)
+    cfg = predictor.config
+    dataset = SpillageChunkDataset(
+        dataset_dir,
+        sorted(index["file"].tolist()) if files is None else files,
+        cloud_key=CLOUD_KEYS[cfg.data.cloud_source],
+        chunk_len=cfg.model.chunk_len,
+        action_normalizer=predictor.action_normalizer,
+        cloud_normalizer=predictor.cloud_normalizer,
+        points_per_object=cfg.data.points_per_object,
+        shuffle=False,
+        seed=cfg.train.seed,
+        cache=False,
+    )
+    p, y, loss = predict(predictor.model, dataset)
+    return {"dataset": str(dataset_dir), "loss": loss, **classification_report(p, y, n_bins)}
