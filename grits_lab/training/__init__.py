@@ -1,0 +1,9 @@
+"""Generic training utilities shared by the policy and the predictor: device, EMA, LR schedule, checkpoints, logs."""
+
+from grits_lab.training.checkpoint import load_checkpoint, save_checkpoint
+from grits_lab.training.device import resolve_device, set_torch_threads
+from grits_lab.training.ema import EMA
+from grits_lab.training.metrics_log import MetricLogger
+from grits_lab.training.schedule import warmup_cosine
+
+__all__ = ["EMA", "MetricLogger", "load_checkpoint", "resolve_device", "save_checkpoint", "set_torch_threads", "warmup_cosine"]

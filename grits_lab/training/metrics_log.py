@@ -1,0 +1,58 @@
+"""Training logs as CSV (one row per logged step, readable with pandas) and TensorBoard when installed.
+
+The CSV is appended to, so a resumed run continues the same file; rows past the resume step
+(written after the last checkpoint by the interrupted run) are dropped on reopening, so the log
+never holds two values for one step.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import Any
+
+
+class MetricLogger:
+    def __init__(self, directory: str | Path, resume_step: int = 0, tensorboard: bool = True) -> None:
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self.path = self.directory / "metrics.csv"
+        self.fields: list[str] = ["step"]
+        rows: list[dict[str, str]] = []
+        if self.path.exists():
+            with open(self.path, newline="") as fh:
+                reader = csv.DictReader(fh)
+                self.fields = list(reader.fieldnames or ["step"])
+                rows = [r for r in reader if r.get("step") and int(float(r["step"])) <= resume_step]
+        self._rewrite(rows)
+        self.writer = None
+        if tensorboard:
+            try:
+                from torch.utils.tensorboard import SummaryWriter
+
+                self.writer = SummaryWriter(str(self.directory / "tensorboard"), purge_step=resume_step + 1)
+            except ImportError:
+                self.writer = None
+
+    def log(self, step: int, values: dict[str, float]) -> None:
+        new = [k for k in values if k not in self.fields]
+        if new:
+            with open(self.path, newline="") as fh:
+                rows = list(csv.DictReader(fh))
+            self.fields += new
+            self._rewrite(rows)
+        with open(self.path, "a", newline="") as fh:
+            csv.DictWriter(fh, fieldnames=self.fields).writerow({"step": step, **values})
+        if self.writer is not None:
+            for key, value in values.items():
+                self.writer.add_scalar(key, value, step)
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
+
+    def _rewrite(self, rows: list[dict[str, Any]]) -> None:
+        with open(self.path, "w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=self.fields)
+            writer.writeheader()
+            writer.writerows(rows)
