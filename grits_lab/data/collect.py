@@ -1,0 +1,188 @@
+"""Collection driver: runs episode specs on an executor and writes each result as one episode file.
+
+It knows nothing about what an episode does (the work function named by each spec does); it owns
+the dataset directory: the manifest (kind, format version, config and its fingerprint), atomic
+episode files, failure records, resume (finished episodes are skipped; the index is rebuilt from
+the files on disk), and the progress bar. The same config always yields the same episode ids and
+seeds, so an interrupted and resumed job ends with the same dataset as an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import yaml
+
+from grits_lab.config import config_fingerprint, config_to_dict
+from grits_lab.data.format import (
+    EPISODE_DIR,
+    FORMAT_VERSION,
+    MANIFEST_FILE,
+    episode_path,
+    list_episode_files,
+    read_meta,
+    rebuild_index,
+    write_episode,
+)
+from grits_lab.errors import StorageError
+from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
+
+FAILURE_DIR = "failures"
+
+
+class DatasetWriter:
+    """Owns one dataset directory: manifest, episode files, failure records and the index.
+
+    `identity` is the part of the config that determines the data (not where or how it runs); a
+    directory made from a different identity is refused instead of being silently mixed.
+    """
+
+    def __init__(self, out_dir: str | Path, kind: str, identity: Any):
+        self.out_dir = ensure_writable_dir(out_dir)
+        self.kind = kind
+        self.fingerprint = config_fingerprint(identity)
+        manifest_path = self.out_dir / MANIFEST_FILE
+        if manifest_path.exists():
+            try:
+                manifest = yaml.safe_load(manifest_path.read_text()) or {}
+            except yaml.YAMLError as exc:
+                raise StorageError(f"unreadable manifest {manifest_path}: {exc}") from None
+            if manifest.get("fingerprint") != self.fingerprint or manifest.get("kind") != kind:
+                raise StorageError(
+                    f"{self.out_dir} holds a {manifest.get('kind')} dataset made with a different config "
+                    f"(fingerprint {manifest.get('fingerprint')} vs {self.fingerprint}); choose another output or remove it"
+                )
+            self.manifest = manifest
+        else:
+            self.manifest = {
+                "format_version": FORMAT_VERSION,
+                "kind": kind,
+                "fingerprint": self.fingerprint,
+                "config": config_to_dict(identity),
+                "status": "in_progress",
+            }
+            self._write_manifest()
+
+    def _write_manifest(self) -> None:
+        write_text_atomic(self.out_dir / MANIFEST_FILE, yaml.safe_dump(self.manifest, sort_keys=False))
+
+    def finished(self) -> dict[str, dict[str, Any]]:
+        """Meta of every readable episode on disk, by id; unreadable files are removed (they are re-run)."""
+        done = {}
+        for path in list_episode_files(self.out_dir):
+            try:
+                meta = read_meta(path)
+            except StorageError:
+                path.unlink(missing_ok=True)
+                continue
+            done[meta["episode_id"]] = meta
+        return done
+
+    def write(self, episode_id: str, payload: dict[str, Any]) -> None:
+        """Store a finished episode (payload: {"arrays": {...}, "meta": {...}}) and clear an old failure."""
+        write_episode(self.out_dir, episode_id, payload["arrays"], payload["meta"])
+        (self.out_dir / FAILURE_DIR / f"{episode_id}.json").unlink(missing_ok=True)
+
+    def write_failure(self, episode_id: str, record: dict[str, Any]) -> None:
+        write_json_atomic(self.out_dir / FAILURE_DIR / f"{episode_id}.json", record)
+
+    def failures(self) -> list[dict[str, Any]]:
+        out = []
+        for path in sorted((self.out_dir / FAILURE_DIR).glob("*.json")):
+            try:
+                out.append(json.loads(path.read_text()))
+            except (OSError, json.JSONDecodeError):
+                continue
+        return out
+
+    def finalize(self, summary: dict[str, Any], complete: bool) -> Any:
+        """Rebuild the index from disk and record the summary in the manifest."""
+        frame = rebuild_index(self.out_dir)
+        self.manifest["status"] = "complete" if complete else "incomplete"
+        self.manifest["summary"] = summary
+        self._write_manifest()
+        return frame
+
+
+def failure_record(result: Any) -> dict[str, Any]:
+    spec = result.spec
+    return {
+        "episode_id": result.episode_id,
+        "error": result.error,
+        "traceback": result.traceback,
+        "attempts": result.attempts,
+        "seed": getattr(spec, "seed", None),
+        "food": getattr(spec, "food", None),
+        "level": getattr(spec, "level", None),
+        "params": {k: v for k, v in (getattr(spec, "params", None) or {}).items() if isinstance(v, (str, int, float, bool))},
+    }
+
+
+class Progress:
+    """tqdm bar: done / total, rate, ETA, failures and the spill ratio so far."""
+
+    def __init__(self, total: int, initial: int, desc: str, enabled: bool = True):
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=total, initial=initial, desc=desc, unit="ep", disable=not enabled, dynamic_ncols=True)
+        self.spilled = 0
+        self.labelled = 0
+        self.failed = 0
+
+    def update(self, n: int = 1, spilled: bool | None = None, failed: bool = False, **extra: Any) -> None:
+        if spilled is not None:
+            self.labelled += 1
+            self.spilled += int(spilled)
+        self.failed += int(failed)
+        post = {"failed": self.failed}
+        if self.labelled:
+            post["spill"] = f"{self.spilled / self.labelled:.2f}"
+        post.update(extra)
+        self.bar.set_postfix(post, refresh=False)
+        self.bar.update(n)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def run_fixed_job(
+    executor: Any,
+    writer: DatasetWriter,
+    specs: list[Any],
+    desc: str,
+    spilled_of: Callable[[dict[str, Any]], bool | None] = lambda meta: None,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Run every spec whose episode is not on disk yet; stream results into the writer."""
+    done = writer.finished()
+    todo = [s for s in specs if s.episode_id not in done]
+    bar = Progress(total=len(specs), initial=len(specs) - len(todo), desc=desc, enabled=progress)
+    for meta in done.values():
+        bar.spilled += int(bool(spilled_of(meta)))
+        bar.labelled += int(spilled_of(meta) is not None)
+    start = time.perf_counter()
+    failed = 0
+    try:
+        for result in executor.map_unordered(todo):
+            if result.ok:
+                writer.write(result.episode_id, result.payload)
+                bar.update(spilled=spilled_of(result.payload["meta"]))
+            else:
+                failed += 1
+                writer.write_failure(result.episode_id, failure_record(result))
+                bar.update(failed=True)
+    finally:
+        bar.close()
+    finished = len(writer.finished())
+    summary = {
+        "episodes": finished,
+        "requested": len(specs),
+        "failed": failed,
+        "run_this_time": len(todo),
+        "wall_time_s_this_time": round(time.perf_counter() - start, 2),
+    }
+    writer.finalize(summary, complete=finished == len(specs))
+    return summary

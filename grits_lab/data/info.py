@@ -1,0 +1,58 @@
+"""Dataset summary for `grits-lab dataset info`: counts by food, shape and label, failures and size on disk."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from grits_lab.data.format import EPISODE_DIR, MANIFEST_FILE, load_index, rebuild_index
+from grits_lab.errors import StorageError
+
+
+def dataset_summary(path: str | Path) -> dict[str, Any]:
+    """A plain-dict summary of the dataset at `path` (rebuilding a missing or stale index)."""
+    path = Path(path)
+    if not (path / MANIFEST_FILE).is_file():
+        raise StorageError(f"not a grits-lab dataset (no {MANIFEST_FILE}): {path}")
+    manifest = yaml.safe_load((path / MANIFEST_FILE).read_text()) or {}
+    n_files = len(list((path / EPISODE_DIR).glob("*.npz")))
+    index = load_index(path)
+    if len(index) != n_files:
+        index = rebuild_index(path, on_corrupt="skip")
+    size = sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+    out: dict[str, Any] = {
+        "path": str(path),
+        "kind": manifest.get("kind"),
+        "format_version": manifest.get("format_version"),
+        "status": manifest.get("status"),
+        "episodes": int(len(index)),
+        "failed": len(list((path / "failures").glob("*.json"))),
+        "size_mb": round(size / 2**20, 2),
+    }
+    for column in ("food", "level", "shape", "label"):
+        if column in index.columns:
+            out[f"by_{column}"] = {str(k): int(v) for k, v in index[column].value_counts().sort_index().items()}
+    if {"shape", "label"} <= set(index.columns):
+        out["by_shape_label"] = {
+            f"{s}/{int(l)}": int(n) for (s, l), n in index.groupby(["shape", "label"]).size().items()
+        }
+    for column in ("scoop_success", "spilled_any", "label"):
+        if column in index.columns and len(index):
+            out[f"mean_{column}"] = round(float(index[column].astype(float).mean()), 3)
+    summary = manifest.get("summary") or {}
+    if "acceptance_rate" in summary:
+        out["acceptance_rate"] = summary["acceptance_rate"]
+    return out
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    lines = []
+    for key, value in summary.items():
+        if isinstance(value, dict):
+            lines.append(f"{key}:")
+            lines += [f"  {k:<24} {v}" for k, v in value.items()]
+        else:
+            lines.append(f"{key:<26} {value}")
+    return "\n".join(lines)
