@@ -1,0 +1,241 @@
+"""The sweep's typed config: search ranges for rho and s, objective, sampler, storage, episodes.
+
+A sweep file (sweeps/NAME.yaml) is loaded into `StudyConfig` and checked on load, so a reversed
+range, a log range through zero or a default outside its range fails before any storage is
+opened or any episode runs, with one line that names the key.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from grits_lab.config import config_fingerprint, load_config, require
+from grits_lab.seeding import derive_seed
+
+_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+
+
+@dataclass(frozen=True)
+class FloatRangeConfig:
+    """Search range of a float parameter; `log` samples uniformly in log space (needs low > 0)."""
+
+    low: float
+    high: float
+    log: bool = False
+
+    def check(self, key: str) -> None:
+        require(math.isfinite(self.low), f"{key}.low", self.low, "a finite number")
+        require(math.isfinite(self.high), f"{key}.high", self.high, "a finite number")
+        require(self.low >= 0.0, f"{key}.low", self.low, ">= 0 (a negative guidance weight pushes toward spillage)")
+        require(self.high > self.low, f"{key}.high", self.high, f"greater than {key}.low = {self.low}")
+        if self.log:
+            require(self.low > 0.0, f"{key}.low", self.low, "> 0 when `log: true`")
+
+    def contains(self, value: float) -> bool:
+        return self.low <= value <= self.high
+
+
+@dataclass(frozen=True)
+class IntRangeConfig:
+    """Search range of an integer parameter, both ends included."""
+
+    low: int
+    high: int
+    step: int = 1
+    log: bool = False
+
+    def check(self, key: str, upper: int) -> None:
+        require(self.low >= 0, f"{key}.low", self.low, ">= 0")
+        require(self.high > self.low, f"{key}.high", self.high, f"greater than {key}.low = {self.low}")
+        require(self.high <= upper, f"{key}.high", self.high, f"<= train_timesteps = {upper} (s is on the training-step scale)")
+        require(self.step >= 1, f"{key}.step", self.step, ">= 1")
+        require((self.high - self.low) % self.step == 0, f"{key}.step", self.step, f"a divisor of high - low = {self.high - self.low}")
+        if self.log:
+            require(self.low >= 1, f"{key}.low", self.low, ">= 1 when `log: true`")
+            require(self.step == 1, f"{key}.step", self.step, "1 when `log: true`")
+
+    def contains(self, value: int) -> bool:
+        return self.low <= value <= self.high and (value - self.low) % self.step == 0
+
+
+@dataclass(frozen=True)
+class GuidancePoint:
+    """One (rho, s) setting, e.g. the paper's defaults that every study evaluates first."""
+
+    rho: float
+    s: int
+
+
+@dataclass(frozen=True)
+class ObjectiveConfig:
+    """What a trial optimizes, from the success and spillage rates over the validation episodes.
+
+    single: maximize success_rate - spillage_weight * spillage_rate.
+    multi:  maximize success_rate and minimize spillage_rate (a Pareto front).
+    `max_spillage` (either mode) adds the constraint spillage_rate <= max_spillage: the sampler
+    prefers feasible trials and the best trial is chosen among feasible ones.
+    """
+
+    mode: Literal["single", "multi"] = "single"
+    spillage_weight: float = 1.0
+    max_spillage: float | None = None
+
+    def __post_init__(self) -> None:
+        require(math.isfinite(self.spillage_weight) and self.spillage_weight >= 0.0,
+                "objective.spillage_weight", self.spillage_weight, "a finite number >= 0")
+        if self.max_spillage is not None:
+            require(0.0 <= self.max_spillage <= 1.0, "objective.max_spillage", self.max_spillage, "in [0, 1]")
+
+    @property
+    def directions(self) -> list[str]:
+        return ["maximize"] if self.mode == "single" else ["maximize", "minimize"]
+
+    @property
+    def value_names(self) -> list[str]:
+        return ["score"] if self.mode == "single" else ["success_rate", "spillage_rate"]
+
+
+@dataclass(frozen=True)
+class SamplerConfig:
+    """The Optuna sampler. Each trial's sampler is seeded from (seed, trial number): reproducible
+    for one worker, and different draws for workers that share a storage."""
+
+    name: Literal["tpe", "random", "gp"] = "tpe"
+    seed: int = 0
+    n_startup_trials: int = 5
+
+    def __post_init__(self) -> None:
+        require(self.seed >= 0, "sampler.seed", self.seed, ">= 0")
+        require(self.n_startup_trials >= 0, "sampler.n_startup_trials", self.n_startup_trials, ">= 0")
+
+
+@dataclass(frozen=True)
+class ValidationEpisode:
+    """One validation episode; its seed is derived from (root seed, food, level, trial)."""
+
+    food: str
+    level: str
+    trial: int
+    seed: int
+
+
+@dataclass(frozen=True)
+class ValidationConfig:
+    """The episodes every trial is evaluated on: foods x levels x trials, seeds derived from root_seed.
+
+    Use a root seed different from the final evaluation's so that tuning does not see test episodes.
+    """
+
+    foods: list[str]
+    levels: list[str]
+    trials: int = 2
+    root_seed: int = 7000
+
+    def __post_init__(self) -> None:
+        require(len(self.foods) > 0, "validation.foods", self.foods, "a non-empty list of food names")
+        require(len(set(self.foods)) == len(self.foods), "validation.foods", self.foods, "without repeats")
+        require(len(self.levels) > 0, "validation.levels", self.levels, "a non-empty list of level names")
+        require(len(set(self.levels)) == len(self.levels), "validation.levels", self.levels, "without repeats")
+        require(self.trials >= 1, "validation.trials", self.trials, ">= 1")
+        require(self.root_seed >= 0, "validation.root_seed", self.root_seed, ">= 0")
+
+    def episodes(self) -> list[ValidationEpisode]:
+        return [
+            ValidationEpisode(food, level, index, derive_seed(self.root_seed, food, level, index))
+            for food in self.foods
+            for level in self.levels
+            for index in range(self.trials)
+        ]
+
+
+@dataclass(frozen=True)
+class EvaluationRefConfig:
+    """Where the real objective gets GRITS from: the evaluation config and the files it needs.
+
+    `checkpoints` lists the files (policy and predictor checkpoints) that must exist before a
+    sweep starts, so a missing file fails in the first second instead of in the first trial.
+    """
+
+    config: str | None = None
+    checkpoints: list[str] = field(default_factory=list)
+    method: str = "grits"
+
+
+@dataclass(frozen=True)
+class SyntheticConfig:
+    """Knobs of the synthetic stand-in objective (used only with `evaluator: synthetic`)."""
+
+    seconds_per_episode: float = 0.0
+    # Raise inside the objective when rho exceeds this value: exercises failed-trial handling.
+    crash_above_rho: float | None = None
+
+    def __post_init__(self) -> None:
+        require(self.seconds_per_episode >= 0.0, "synthetic.seconds_per_episode", self.seconds_per_episode, ">= 0")
+
+
+@dataclass(frozen=True)
+class StudyConfig:
+    """A sweep over GRITS's guidance weight rho and threshold s (paper Algorithm 1)."""
+
+    study_name: str
+    n_trials: int
+    validation: ValidationConfig
+    rho: FloatRangeConfig = FloatRangeConfig(0.25, 10.0, log=True)
+    s: IntRangeConfig = IntRangeConfig(6, 60)
+    # The diffusion schedule's training steps T; s is a step on this scale (paper: T = 100, s = 30).
+    train_timesteps: int = 100
+    # Evaluated first, in this order (the paper's rho = 2.5, s = 30 by default).
+    enqueue: list[GuidancePoint] = field(default_factory=lambda: [GuidancePoint(2.5, 30)])
+    objective: ObjectiveConfig = ObjectiveConfig()
+    sampler: SamplerConfig = SamplerConfig()
+    # "grits": GRITS through the evaluation layer. "synthetic": a fast, deterministic stand-in
+    # (not GRITS, not simulation) for testing the sweep machinery.
+    evaluator: Literal["grits", "synthetic"] = "grits"
+    evaluation: EvaluationRefConfig = EvaluationRefConfig()
+    synthetic: SyntheticConfig = SyntheticConfig()
+    # None: a journal file under results_dir/study_name/. Otherwise an RDB URL
+    # (postgresql://user:password@host:port/db, sqlite:///path.db, mysql://...) or a journal file path.
+    storage: str | None = None
+    results_dir: str = "results/sweeps"
+    # A running trial writes a heartbeat this often; one silent for stale_after_s is taken as dead.
+    heartbeat_s: float = 20.0
+    stale_after_s: float = 120.0
+
+    def __post_init__(self) -> None:
+        require(bool(_NAME_RE.match(self.study_name)), "study_name", self.study_name,
+                "letters, digits, '_', '.', '-' (it names a folder)")
+        require(self.n_trials >= 1, "n_trials", self.n_trials, ">= 1")
+        require(self.train_timesteps >= 1, "train_timesteps", self.train_timesteps, ">= 1")
+        self.rho.check("rho")
+        self.s.check("s", self.train_timesteps)
+        for i, point in enumerate(self.enqueue):
+            require(self.rho.contains(point.rho), f"enqueue[{i}].rho", point.rho,
+                    f"inside rho's range [{self.rho.low}, {self.rho.high}]")
+            require(self.s.contains(point.s), f"enqueue[{i}].s", point.s,
+                    f"inside s's range [{self.s.low}, {self.s.high}] on its step {self.s.step}")
+        if self.evaluator == "grits":
+            require(bool(self.evaluation.config), "evaluation.config", self.evaluation.config,
+                    "the path of an evaluation config when `evaluator: grits`")
+        require(self.heartbeat_s > 0, "heartbeat_s", self.heartbeat_s, "> 0")
+        require(self.stale_after_s > 2 * self.heartbeat_s, "stale_after_s", self.stale_after_s,
+                f"more than twice heartbeat_s = {self.heartbeat_s}")
+
+    @property
+    def out_dir(self) -> Path:
+        return Path(self.results_dir) / self.study_name
+
+    def identity(self) -> str:
+        """Fingerprint of what makes trials comparable: ranges, objective, episodes, evaluator."""
+        return config_fingerprint({
+            "rho": self.rho, "s": self.s, "train_timesteps": self.train_timesteps,
+            "objective": self.objective, "validation": self.validation,
+            "evaluator": self.evaluator, "evaluation": self.evaluation,
+        })
+
+
+def load_study_config(path: str | Path) -> StudyConfig:
+    return load_config(path, StudyConfig)

@@ -1,0 +1,265 @@
+"""A study's outputs: trials table (CSV, Parquet), best parameters (YAML), summary, Pareto and importance plots.
+
+Everything here is recomputed from the storage, so `grits-lab sweep --report-only` regenerates
+the outputs of a study run by other machines. The best-parameter file holds only the
+`guidance: {rho, s}` section, which `grits-lab evaluate` takes as an override.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import optuna
+import pandas as pd
+import yaml
+from optuna.trial import FrozenTrial, TrialState
+
+from grits_lab.io import save_parquet_atomic, write_json_atomic, write_text_atomic
+from grits_lab.tune.config import StudyConfig
+from grits_lab.tune.study import (
+    ENQUEUED_ATTR, ERROR_ATTR, REQUEUED_ATTR, RETRY_OF_ATTR, WORKER_ATTR,
+)
+
+METRIC_ATTRS = ("success_rate", "spillage_rate", "scoop_failure_rate", "n_episodes", "n_errors")
+
+
+def trials_frame(study: optuna.Study, config: StudyConfig) -> pd.DataFrame:
+    """One row per trial in the study, in trial-number order."""
+    names = config.objective.value_names
+    rows = []
+    for t in study.get_trials(deepcopy=False):
+        row = {"number": t.number, "state": t.state.name,
+               "rho": t.params.get("rho", math.nan), "s": t.params.get("s", -1)}
+        for i, name in enumerate(names):
+            row[f"value_{name}"] = t.values[i] if t.values is not None else math.nan
+        for key in METRIC_ATTRS:
+            row[key] = t.user_attrs.get(key, math.nan)
+        row["feasible"] = _feasible(t, config)
+        row["enqueued"] = bool(t.user_attrs.get(ENQUEUED_ATTR, False))
+        row["retry_of"] = t.user_attrs.get(RETRY_OF_ATTR, -1)
+        row["requeued"] = bool(t.user_attrs.get(REQUEUED_ATTR, False))
+        row["error"] = t.user_attrs.get(ERROR_ATTR, "")
+        row["worker"] = t.user_attrs.get(WORKER_ATTR, "")
+        row["datetime_start"] = t.datetime_start
+        row["datetime_complete"] = t.datetime_complete
+        row["duration_s"] = t.user_attrs.get("duration_s", math.nan)
+        rows.append(row)
+    frame = pd.DataFrame(rows)
+    if not rows:
+        return frame
+    return frame.astype({"s": "int64", "retry_of": "int64"})
+
+
+def _feasible(trial: FrozenTrial, config: StudyConfig) -> bool:
+    limit = config.objective.max_spillage
+    spill = trial.user_attrs.get("spillage_rate")
+    return spill is not None and (limit is None or spill <= limit)
+
+
+def _score(trial: FrozenTrial, config: StudyConfig) -> float:
+    return trial.user_attrs["success_rate"] - config.objective.spillage_weight * trial.user_attrs["spillage_rate"]
+
+
+def pareto_front(trials: list[FrozenTrial]) -> list[FrozenTrial]:
+    """Trials not dominated in (maximize success_rate, minimize spillage_rate)."""
+    def dominates(a: FrozenTrial, b: FrozenTrial) -> bool:
+        sa, pa = a.user_attrs["success_rate"], a.user_attrs["spillage_rate"]
+        sb, pb = b.user_attrs["success_rate"], b.user_attrs["spillage_rate"]
+        return sa >= sb and pa <= pb and (sa > sb or pa < pb)
+
+    return [t for t in trials if not any(dominates(o, t) for o in trials if o is not t)]
+
+
+def best_trial(study: optuna.Study, config: StudyConfig) -> tuple[FrozenTrial | None, str]:
+    """The trial whose (rho, s) the sweep recommends, and a note on how it was chosen.
+
+    Feasible trials (spillage_rate <= max_spillage, when set) first; in multi-objective mode the
+    choice is made on the Pareto front; ties in success - spillage_weight * spillage go to the
+    earlier trial.
+    """
+    complete = [t for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
+                if "success_rate" in t.user_attrs]
+    if not complete:
+        return None, "no completed trial yet"
+    pool, note = complete, f"highest success - {config.objective.spillage_weight:g} * spillage"
+    if config.objective.max_spillage is not None:
+        feasible = [t for t in pool if _feasible(t, config)]
+        if feasible:
+            pool, note = feasible, note + f" among trials with spillage <= {config.objective.max_spillage:g}"
+        else:
+            note += f"; NO trial met spillage <= {config.objective.max_spillage:g}"
+    if config.objective.mode == "multi":
+        pool, note = pareto_front(pool), note + " on the Pareto front"
+    return max(pool, key=lambda t: (_score(t, config), -t.number)), note
+
+
+def default_trial(study: optuna.Study, config: StudyConfig) -> FrozenTrial | None:
+    """The completed trial of the first enqueued point (the paper's defaults), if any."""
+    if not config.enqueue:
+        return None
+    point = config.enqueue[0]
+    for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)):
+        if math.isclose(t.params.get("rho", math.nan), point.rho) and t.params.get("s") == point.s:
+            return t
+    return None
+
+
+def _metrics(t: FrozenTrial | None) -> dict | None:
+    if t is None:
+        return None
+    return {"trial": t.number, "rho": t.params["rho"], "s": t.params["s"],
+            **{k: t.user_attrs.get(k) for k in METRIC_ATTRS}}
+
+
+def write_outputs(study: optuna.Study, config: StudyConfig, out_dir: Path, storage_description: str,
+                  evaluator_label: str, plots: bool = True) -> dict:
+    """Write every output under `out_dir`; return the summary that is also saved as summary.json."""
+    out_dir = Path(out_dir)
+    frame = trials_frame(study, config)
+    write_text_atomic(out_dir / "trials.csv", frame.to_csv(index=False))
+    save_parquet_atomic(out_dir / "trials.parquet", frame)
+    best, how = best_trial(study, config)
+    defaults = default_trial(study, config)
+    if best is not None:
+        write_text_atomic(out_dir / "best.yaml", _best_yaml(config, best, defaults, how, evaluator_label))
+    summary = {
+        "study_name": config.study_name,
+        "storage": storage_description,
+        "evaluator": evaluator_label,
+        "objective": config.objective.mode,
+        "n_trials_budget": config.n_trials,
+        "states": {s: int((frame["state"] == s).sum()) for s in sorted(frame["state"].unique())} if len(frame) else {},
+        "episodes_per_trial": len(config.validation.episodes()),
+        "best": _metrics(best),
+        "best_rule": how,
+        "defaults": _metrics(defaults),
+        "dashboard": f"optuna-dashboard {storage_description}",
+        "notes": [],
+    }
+    if plots:
+        summary["notes"].append(plot_tradeoff(study, config, out_dir / "pareto.png", evaluator_label))
+        summary["notes"].append(plot_importance(study, config, out_dir / "importance.png"))
+    summary["notes"] = [n for n in summary["notes"] if n]
+    write_json_atomic(out_dir / "summary.json", summary)
+    return summary
+
+
+def _best_yaml(config: StudyConfig, best: FrozenTrial, defaults: FrozenTrial | None, how: str, label: str) -> str:
+    def line(t: FrozenTrial) -> str:
+        a = t.user_attrs
+        return (f"success {a['success_rate']:.3f}, spillage {a['spillage_rate']:.3f}, "
+                f"scoop failure {a['scoop_failure_rate']:.3f} over {a['n_episodes']} episodes")
+
+    header = [
+        f"# Best guidance of sweep `{config.study_name}`: trial {best.number} ({how}).",
+        f"# Evaluator: {label}.",
+        f"# This trial: {line(best)}.",
+    ]
+    if defaults is not None:
+        header.append(f"# Paper defaults rho={defaults.params['rho']:g} s={defaults.params['s']} "
+                      f"(trial {defaults.number}): {line(defaults)}.")
+    header.append("# Pass it to `grits-lab evaluate` as an override of the evaluation config's guidance section.")
+    body = yaml.safe_dump({"guidance": {"rho": float(best.params["rho"]), "s": int(best.params["s"])}},
+                          sort_keys=False)
+    return "\n".join(header) + "\n" + body
+
+
+def plot_tradeoff(study: optuna.Study, config: StudyConfig, path: Path, label: str) -> str:
+    """Success vs spillage of every completed trial, Pareto front joined, defaults and best marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    complete = [t for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
+                if "success_rate" in t.user_attrs]
+    if not complete:
+        return "pareto.png not written: no completed trial"
+    fig, ax = plt.subplots(figsize=(6, 4.5), dpi=120)
+    spill = [t.user_attrs["spillage_rate"] for t in complete]
+    success = [t.user_attrs["success_rate"] for t in complete]
+    points = ax.scatter(spill, success, c=[t.params["rho"] for t in complete], cmap="viridis",
+                        s=[20 + 2 * t.params["s"] for t in complete], alpha=0.8, edgecolors="k", linewidths=0.3)
+    fig.colorbar(points, ax=ax, label="rho (marker size: s)")
+    front = sorted(pareto_front(complete), key=lambda t: t.user_attrs["spillage_rate"])
+    ax.step([t.user_attrs["spillage_rate"] for t in front], [t.user_attrs["success_rate"] for t in front],
+            where="post", color="tab:red", marker="x", markersize=8, label=f"Pareto front ({len(front)})")
+    defaults = default_trial(study, config)
+    if defaults is not None:
+        ax.scatter([defaults.user_attrs["spillage_rate"]], [defaults.user_attrs["success_rate"]], marker="*",
+                   s=250, facecolors="none", edgecolors="tab:orange", linewidths=1.5, label="paper defaults")
+    best, _ = best_trial(study, config)
+    if best is not None:
+        ax.scatter([best.user_attrs["spillage_rate"]], [best.user_attrs["success_rate"]], marker="o",
+                   s=200, facecolors="none", edgecolors="tab:red", linewidths=1.5, label=f"best (trial {best.number})")
+    if config.objective.max_spillage is not None:
+        ax.axvline(config.objective.max_spillage, color="gray", linestyle="--", label="spillage limit")
+    ax.set_xlabel("spillage rate (lower is better)")
+    ax.set_ylabel("task success rate (higher is better)")
+    ax.set_title(f"{config.study_name}: {len(complete)} trials, {label}", fontsize=9)
+    ax.set_xlim(-0.03, max(0.3, max(spill) + 0.05))
+    ax.set_ylim(-0.03, 1.03)
+    ax.legend(fontsize=7, loc="best", framealpha=0.6)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    _save_figure(fig, path)
+    plt.close(fig)
+    return ""
+
+
+def plot_importance(study: optuna.Study, config: StudyConfig, path: Path) -> str:
+    """Importance of rho and s per objective (PED-ANOVA); needs at least 2 completed trials."""
+    complete = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
+    distinct = {(t.params.get("rho"), t.params.get("s")) for t in complete}
+    if len(complete) < 2 or len(distinct) < 2:
+        return (f"importance.png not written: parameter importance needs at least 2 completed trials "
+                f"with different parameters (have {len(complete)} trials, {len(distinct)} distinct)")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import warnings
+
+    from optuna.importance import PedAnovaImportanceEvaluator, get_param_importances
+
+    # PED-ANOVA needs no extra library and is deterministic; it scores how differently rho and s
+    # are distributed in the best trials than in all trials, and it reads targets as
+    # lower-is-better, hence the signs below.
+    names = config.objective.value_names
+    signs = [-1.0] if config.objective.mode == "single" else [-1.0, 1.0]
+    quantile = min(0.5, max(0.1, 2.0 / len(complete)))
+    importances = {}
+    for i, name in enumerate(names):
+        evaluator = PedAnovaImportanceEvaluator(target_quantile=quantile)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                importances[name] = get_param_importances(
+                    study, evaluator=evaluator, params=["rho", "s"],
+                    target=lambda t, i=i: signs[i] * t.values[i], normalize=False)
+        except (ValueError, RuntimeError, ZeroDivisionError) as exc:
+            return f"importance.png not written: {exc}"
+    fig, ax = plt.subplots(figsize=(5, 3), dpi=120)
+    width = 0.8 / len(names)
+    for j, name in enumerate(names):
+        values = [importances[name].get(p, 0.0) for p in ("rho", "s")]
+        ax.barh([k + j * width for k in range(2)], values, height=width, label=name)
+    ax.set_yticks([k + width * (len(names) - 1) / 2 for k in range(2)], ["rho", "s"])
+    ax.set_xlabel("PED-ANOVA importance (0: no effect on the best trials)")
+    ax.set_title(f"{config.study_name}: parameter importance ({len(complete)} trials)", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    _save_figure(fig, path)
+    plt.close(fig)
+    return ""
+
+
+def _save_figure(fig, path: Path) -> None:
+    import io
+
+    from grits_lab.io import write_bytes_atomic
+
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png")
+    write_bytes_atomic(path, buffer.getvalue())

@@ -1,0 +1,94 @@
+"""Open a study's storage: a crash-safe journal file by default, an RDB or shared journal by URL.
+
+Journal files (Optuna's JournalStorage with a file backend) append one record per operation under
+a file lock: a killed process leaves at most an unfinished trial, never a corrupt study, and
+several processes (or machines on a shared disk) can append to one file. An RDB URL
+(postgresql://, mysql://, sqlite:///) goes through SQLAlchemy; PostgreSQL and MySQL serve many
+machines, SQLite suits one writer only. Unreachable storage fails with one line, passwords hidden.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+
+from optuna.storages import BaseStorage, JournalStorage, RDBStorage
+from optuna.storages.journal import JournalFileBackend
+
+from grits_lab.errors import StorageError
+from grits_lab.io import ensure_writable_dir
+
+RDB_SCHEMES = ("postgresql", "postgres", "mysql", "sqlite")
+_DRIVER_HINT = {"postgresql": "psycopg2-binary", "mysql": "PyMySQL"}
+
+
+def redact(spec: str) -> str:
+    """The storage spec with any password replaced by ***."""
+    return re.sub(r"(://[^/:@]*:)[^@/]*@", r"\1***@", spec)
+
+
+def open_storage(spec: str | None, default_journal: Path) -> tuple[BaseStorage, str]:
+    """(storage, printable description). `spec` None means the journal file `default_journal`."""
+    if spec is None:
+        return _open_journal(Path(default_journal)), str(default_journal)
+    if "://" not in spec:
+        return _open_journal(Path(spec)), spec
+    scheme = spec.split("://", 1)[0].split("+", 1)[0].lower()
+    if scheme not in RDB_SCHEMES:
+        raise StorageError(
+            f"unsupported storage URL {redact(spec)}: use postgresql://, mysql://, sqlite:/// or a journal file path"
+        )
+    if scheme == "postgres":  # SQLAlchemy dropped this alias
+        spec, scheme = "postgresql" + spec[len("postgres"):], "postgresql"
+    return _open_rdb(spec, scheme), redact(spec)
+
+
+def _open_journal(path: Path) -> JournalStorage:
+    if path.is_dir():
+        raise StorageError(f"journal storage path {path} is a directory; give a file path such as {path}/journal.log")
+    ensure_writable_dir(path.parent if str(path.parent) else Path("."))
+    try:
+        return JournalStorage(JournalFileBackend(str(path)))
+    except OSError as exc:
+        raise StorageError(f"cannot open journal storage {path}: {exc.strerror or exc}") from None
+    except (ValueError, KeyError) as exc:
+        raise StorageError(f"journal storage {path} is not a readable Optuna journal: {exc}") from None
+
+
+def _open_rdb(url: str, scheme: str) -> RDBStorage:
+    import sqlalchemy.exc
+
+    engine_kwargs: dict = {"pool_pre_ping": True}
+    if scheme in ("postgresql", "mysql"):
+        engine_kwargs["connect_args"] = {"connect_timeout": 10}
+    # Two workers starting at once on an empty database may race on creating Optuna's tables:
+    # the loser sees an integrity or programming error and simply retries.
+    for attempt in range(5):
+        try:
+            return RDBStorage(url, engine_kwargs=engine_kwargs)
+        except ModuleNotFoundError as exc:
+            driver = _DRIVER_HINT.get(scheme, "its driver")
+            raise StorageError(f"storage {redact(url)} needs the database driver {exc.name} (pip install {driver})") from None
+        except sqlalchemy.exc.OperationalError as exc:
+            raise StorageError(f"cannot reach storage {redact(url)}: {_first_line(exc.orig or exc)}") from None
+        except (sqlalchemy.exc.IntegrityError, sqlalchemy.exc.ProgrammingError) as exc:
+            if attempt == 4:
+                raise StorageError(f"cannot initialize storage {redact(url)}: {_first_line(exc.orig or exc)}") from None
+            time.sleep(0.2 * (attempt + 1))
+        except sqlalchemy.exc.ArgumentError as exc:
+            raise StorageError(f"invalid storage URL {redact(url)}: {_first_line(exc)}") from None
+        except sqlalchemy.exc.SQLAlchemyError as exc:
+            raise StorageError(f"cannot open storage {redact(url)}: {_first_line(exc)}") from None
+    raise AssertionError("unreachable")
+
+
+def _first_line(exc: object) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def dashboard_command(storage_description: str) -> str:
+    """The shell command that opens this storage in optuna-dashboard (extra `dashboard`)."""
+    return f"optuna-dashboard {storage_description}"
+
