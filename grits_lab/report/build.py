@@ -1,0 +1,168 @@
+"""Assemble a report from a run directory: read records, build tables and figures, write every format.
+
+Output layout (OUT defaults to RUN_DIR/report):
+
+    report.md         all tables (Markdown) with the figures linked
+    report.html       one self-contained page: all tables, figures embedded, provenance
+    report.tex        all tables as booktabs LaTeX (latex/<table>.tex holds each alone)
+    csv/<table>.csv   the numbers behind every table (rates, Wilson bounds, counts)
+    figures/*.png     bar charts with Wilson 95% error bars, per-food stacks, heatmaps, sweep front
+    provenance.json   what produced the records and the report
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
+from grits_lab.report import figures
+from grits_lab.report.loading import RunData, load_run
+from grits_lab.report.provenance import episode_counts, error_messages, report_provenance
+from grits_lab.report.render import (
+    Preformatted,
+    ReportFigure,
+    Section,
+    render_html,
+    render_markdown,
+    table_latex,
+    to_json_text,
+    write_csv,
+)
+from grits_lab.report.sweep import summarize_sweep, sweep_tables
+from grits_lab.report.tables import (
+    ReportTable,
+    all_variants,
+    breakdown_long,
+    breakdown_tables,
+    claims_table,
+    method_table,
+    per_food_table,
+)
+from grits_lab.report.vocabulary import ABLATION_METHODS, MAIN_METHODS, PAPER_LABEL, SIM_LABEL
+
+
+@dataclass
+class ReportResult:
+    out_dir: Path
+    files: list[Path] = field(default_factory=list)
+    tables: list[ReportTable] = field(default_factory=list)
+    missing: list[str] = field(default_factory=list)
+
+
+def default_out_dir(run_dir: str | Path) -> Path:
+    run_dir = Path(run_dir)
+    return (run_dir if run_dir.is_dir() else run_dir.parent) / "report"
+
+
+def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> ReportResult:
+    out = Path(out_dir) if out_dir is not None else default_out_dir(run_dir)
+    run = load_run(run_dir, exclude=out)
+    ensure_writable_dir(out)
+    result = ReportResult(out)
+    sections = _results_sections(run, out, result) + [_provenance_section(run, out, result)]
+    missing = list(dict.fromkeys(note for table in result.tables for note in table.notes if note.startswith("Missing")))
+    result.missing = missing
+    overview = Section("Overview", [
+        f"Simulated results of run {run.run_dir}, beside the paper's real-robot numbers where the paper states "
+        f"them. Labels: '{SIM_LABEL}' for this run, '{PAPER_LABEL}' for the paper. Rates carry Wilson 95% "
+        "intervals and episode counts; a method or food without records is shown as — and listed below, never as zero.",
+        *(missing or ["Missing data: none."]),
+    ])
+    sections.insert(0, overview)
+    title = f"GRITS reproduction report: {run.run_dir.resolve().name}"
+    result.files.append(_write(out / "report.md", render_markdown(title, sections, out)))
+    result.files.append(_write(out / "report.html", render_html(title, sections)))
+    result.files.append(_write(out / "report.tex", "\n".join(table_latex(t) for t in result.tables)))
+    result.files = list(dict.fromkeys(result.files))
+    return result
+
+
+def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Section]:
+    episodes = run.episodes
+    sections = []
+    if episodes is not None:
+        claims = claims_table(episodes)
+        fig5 = method_table(episodes, MAIN_METHODS, "fig5_overall", "Fig. 5: task success, spillage and scoop failure",
+                            "Every method over all evaluated foods and quantity levels.", extra=True)
+        fig8 = method_table(episodes, ABLATION_METHODS, "fig8_ablation", "Fig. 8: spillage predictor ablation",
+                            "GRITS with a raw camera cloud, with a PointNet++ encoder, and with the composite cloud + DP3 encoder.")
+        fig6 = per_food_table(episodes)
+        breakdown = breakdown_tables(episodes)
+        sections.append(Section("The paper beside the simulation", [_table(claims, out, result)]))
+        sections.append(Section("Fig. 5: overall results", [
+            _table(fig5, out, result),
+            _figure("fig5_overall", fig5.title, "Bars: simulation; white diamonds: real robot (paper); error bars: Wilson 95%.",
+                    figures.method_bars(fig5.data, out / "figures" / "fig5_overall.png", fig5.title), result),
+        ]))
+        items = [_table(fig6, out, result)]
+        if not fig6.data.empty:
+            items.append(_figure("fig6_per_food", fig6.title, fig6.caption,
+                                 figures.per_food_stacks(fig6.data, out / "figures" / "fig6_per_food.png", fig6.title), result))
+        sections.append(Section("Fig. 6: per food", items))
+        sections.append(Section("Fig. 8: predictor ablation", [
+            _table(fig8, out, result),
+            _figure("fig8_ablation", fig8.title, "Bars: simulation; error bars: Wilson 95%.",
+                    figures.method_bars(fig8.data, out / "figures" / "fig8_ablation.png", fig8.title), result),
+        ]))
+        long = ReportTable("breakdown_long", "Per method x food x level (long form)", "", episodes.head(0), breakdown_long(episodes))
+        result.files.append(write_csv(long, out / "csv" / "breakdown_long.csv"))
+        heatmap = figures.breakdown_heatmap({t.key.removeprefix("breakdown_"): t.data for t in breakdown},
+                                            all_variants(episodes), out / "figures" / "breakdown_heatmap.png")
+        sections.append(Section("Per food x quantity level", [
+            *(_table(t, out, result) for t in breakdown),
+            _figure("breakdown_heatmap", "Per food x quantity level", "Rates per cell with k/n; hatched: no episodes.", heatmap, result),
+            "csv/breakdown_long.csv holds every (method, food, level) cell with Wilson 95% intervals.",
+        ]))
+    if run.trials is not None:
+        summary = summarize_sweep(run.trials, run.best_params)
+        best_file = str(run.best_params_file) if run.best_params_file else None
+        items = [_table(t, out, result) for t in sweep_tables(summary, run.best_params, best_file)]
+        front = figures.sweep_front(summary, out / "figures" / "sweep_front.png")
+        if front is not None:
+            items.append(_figure("sweep_front", "Sweep: objectives of completed trials", "Red: Pareto front; star: the paper's defaults.", front, result))
+        sections.append(Section(f"Sweep summary ({run.trials_file})", items))
+    return sections
+
+
+def _provenance_section(run: RunData, out: Path, result: ReportResult) -> Section:
+    provenance = report_provenance(run, out)
+    result.files.append(_json(out / "provenance.json", provenance))
+    counts = ReportTable("episode_counts", "Episode counts", "Episodes and errors per method as read from the records.",
+                         episode_counts(run.episodes).astype(str), episode_counts(run.episodes))
+    errors = ReportTable("error_messages", "Errors", "The commonest errors that ended episodes (each counts as a task failure).",
+                         error_messages(run.episodes).astype(str), error_messages(run.episodes))
+    items = [
+        Preformatted("Report provenance (provenance.json)", to_json_text({k: v for k, v in provenance.items() if k != "run provenance"}), "json"),
+        _table(counts, out, result),
+        _table(errors, out, result),
+    ]
+    for name, value in run.provenance.items():
+        items.append(Preformatted(f"Run provenance: {name}", to_json_text(value), "json"))
+    for name, text in run.configs.items():
+        items.append(Preformatted(f"Config: {name}", text, "yaml"))
+    if not run.provenance and not run.configs:
+        items.append("The run directory holds no config.yaml or provenance.json: the records' origin is not documented.")
+    return Section("Provenance", items)
+
+
+def _table(table: ReportTable, out: Path, result: ReportResult) -> ReportTable:
+    result.tables.append(table)
+    result.files.append(write_csv(table, out / "csv" / f"{table.key}.csv"))
+    result.files.append(_write(out / "latex" / f"{table.key}.tex", table_latex(table)))
+    return table
+
+
+def _figure(key: str, title: str, caption: str, path: Path, result: ReportResult) -> ReportFigure:
+    result.files.append(path)
+    return ReportFigure(key, title, caption, path)
+
+
+def _write(path: Path, text: str) -> Path:
+    write_text_atomic(path, text)
+    return path
+
+
+def _json(path: Path, value: object) -> Path:
+    write_json_atomic(path, value)
+    return path

@@ -1,0 +1,261 @@
+"""Find and read a run's evaluation records, sweep tables and provenance files into one RunData.
+
+What the report expects in RUN_DIR (written by `grits-lab evaluate` and `grits-lab sweep`):
+
+* episode records, one row per episode with the columns of grits_lab/records.py, as Parquet:
+  `episodes.parquet`, or several `*.parquet` shards, directly in RUN_DIR or in RUN_DIR/records/
+  or RUN_DIR/episodes/ (RUN_DIR may also be a single .parquet file). Rows that appear in more
+  than one file (a consolidated file beside its shards) are counted once.
+* optional run metadata: `config.yaml` (and any other *.yaml at the top level) and
+  `provenance.json`, shown verbatim in the report's provenance section.
+* optional sweep outputs anywhere up to two folders below RUN_DIR: a trials table
+  `trials.parquet` (preferred) or `trials.csv`, and a best-parameters YAML (`best_params.yaml` or
+  `best*.yaml`) beside it.
+
+Records are read, never re-scored: the only change made is that an episode with a non-empty
+`error` has its task success set to False (it counts as a failure and is shown as a count).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import yaml
+
+from grits_lab.errors import InputError, StorageError
+from grits_lab.records import OUTCOME_COLUMNS
+from grits_lab.report.vocabulary import canonical_name, method_display
+
+REQUIRED_COLUMNS = ("method", "food", "level", *OUTCOME_COLUMNS)
+FLAG_COLUMNS = (*OUTCOME_COLUMNS, "spilled_before_scoop")
+RECORD_SUBDIRS = ("records", "episodes")
+TRIALS_FILES = ("trials.parquet", "trials.csv")
+NOT_RECORD_FILES = {"trials.parquet", "index.parquet"}
+MAX_CONFIG_CHARS = 20_000
+# Columns that identify one episode; a row seen twice with the same identity is a duplicate.
+IDENTITY_COLUMNS = ("run_id", "method", "food", "level", "trial", "seed", "rho", "s")
+
+
+@dataclass
+class RunData:
+    """Everything the report reads from a run directory."""
+
+    run_dir: Path
+    episodes: pd.DataFrame | None = None
+    episode_files: list[Path] = field(default_factory=list)
+    ignored_files: list[str] = field(default_factory=list)
+    duplicates_dropped: int = 0
+    trials: pd.DataFrame | None = None
+    trials_file: Path | None = None
+    best_params: dict[str, Any] | None = None
+    best_params_file: Path | None = None
+    configs: dict[str, str] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+
+def load_run(run_dir: str | Path, exclude: str | Path | None = None) -> RunData:
+    """Read RUN_DIR; `exclude` (the report's own output folder) is never searched for inputs."""
+    run_dir = Path(run_dir)
+    if not run_dir.exists():
+        raise InputError(f"run directory not found: {run_dir}")
+    excluded = Path(exclude).resolve() if exclude is not None else None
+    data = RunData(run_dir=run_dir)
+    record_files = _record_files(run_dir, excluded)
+    frames = []
+    for path in record_files:
+        frame = _read_table(path)
+        missing = [c for c in REQUIRED_COLUMNS if c not in frame.columns]
+        if missing:
+            data.ignored_files.append(f"{path.name} (not episode records: lacks {', '.join(missing)})")
+            continue
+        data.episode_files.append(path)
+        frames.append(frame)
+    base = run_dir if run_dir.is_dir() else run_dir.parent
+    data.trials_file = _find_trials(base, excluded)
+    if data.trials_file is not None:
+        data.trials = _read_table(data.trials_file)
+        data.best_params_file = _find_best_params(data.trials_file.parent)
+        if data.best_params_file is not None:
+            data.best_params = _read_yaml(data.best_params_file)
+    if not frames and data.trials is None:
+        detail = f"; ignored: {'; '.join(data.ignored_files)}" if data.ignored_files else ""
+        raise InputError(
+            f"no episode records in {run_dir}: expected episodes.parquet or *.parquet files with "
+            f"columns {', '.join(REQUIRED_COLUMNS)} (or a sweep trials.parquet/trials.csv){detail}"
+        )
+    if frames:
+        combined = pd.concat(frames, ignore_index=True)
+        data.episodes, data.duplicates_dropped = _deduplicate(normalize_records(combined))
+    data.configs = _read_configs(base, data.trials_file, data.best_params_file)
+    data.provenance = _read_provenance(base, data.trials_file)
+    return data
+
+
+def normalize_records(frame: pd.DataFrame) -> pd.DataFrame:
+    """Typed copy of raw records, with `is_error`, `food_key` and the method `variant` added.
+
+    A method evaluated at more than one guidance setting (rho, s) is split into variants, one
+    per setting, so that rows from different settings are never pooled into one rate.
+    """
+    frame = frame.copy()
+    missing = [c for c in REQUIRED_COLUMNS if c not in frame.columns]
+    if missing:
+        raise InputError(f"episode records lack required columns: {', '.join(missing)}")
+    for column in ("method", "food", "level"):
+        if frame[column].isna().any():
+            raise InputError(f"episode records have {int(frame[column].isna().sum())} rows without `{column}`")
+        frame[column] = frame[column].astype(str)
+    if "error" not in frame.columns:
+        frame["error"] = ""
+    frame["error"] = frame["error"].fillna("").astype(str).str.strip()
+    frame["is_error"] = frame["error"] != ""
+    for column in FLAG_COLUMNS:
+        if column in frame.columns:
+            frame[column] = _to_flag(frame[column], column, frame["is_error"])
+    frame.loc[frame["is_error"], "task_success"] = False
+    frame["food_key"] = frame["food"].map(canonical_name)
+    frame["rho"] = pd.to_numeric(frame["rho"], errors="coerce") if "rho" in frame.columns else math.nan
+    frame["s"] = pd.to_numeric(frame["s"], errors="coerce").fillna(-1).astype(int) if "s" in frame.columns else -1
+    frame["variant"], frame["variant_name"] = _variants(frame)
+    return frame
+
+
+def _to_flag(values: pd.Series, column: str, is_error: pd.Series) -> pd.Series:
+    """Booleans from bool/0-1 columns; an unset flag is an input error unless the episode errored."""
+    numeric = pd.to_numeric(values.map(lambda v: v if not isinstance(v, str) else _parse_bool(v, column)), errors="coerce")
+    bad = numeric.notna() & ~numeric.isin([0, 1])
+    if bad.any():
+        raise InputError(f"`{column}` must be true/false; got {values[bad].iloc[0]!r} in {int(bad.sum())} rows")
+    unset = numeric.isna() & ~is_error
+    if unset.any():
+        raise InputError(f"`{column}` is missing in {int(unset.sum())} episode records without an error")
+    return numeric.fillna(0).astype(bool)
+
+
+def _parse_bool(text: str, column: str) -> float:
+    lowered = text.strip().lower()
+    if lowered in ("true", "1", "yes"):
+        return 1.0
+    if lowered in ("false", "0", "no"):
+        return 0.0
+    if lowered in ("", "nan", "none", "null"):
+        return math.nan
+    raise InputError(f"`{column}` must be true/false; got {text!r}")
+
+
+def _variants(frame: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
+    variant = frame["method"].copy()
+    name = frame["method"].map(method_display)
+    for method, rows in frame.groupby("method", sort=False):
+        settings = rows[["rho", "s"]].drop_duplicates()
+        if len(settings) <= 1:
+            continue
+        for index, row in rows.iterrows():
+            label = _setting_label(row["rho"], row["s"])
+            variant.at[index] = f"{method}[{label}]"
+            name.at[index] = f"{method_display(method)} ({label})"
+    return variant, name
+
+
+def _setting_label(rho: float, s: int) -> str:
+    rho_text = "none" if pd.isna(rho) else f"{rho:g}"
+    return f"rho={rho_text}, s={int(s)}"
+
+
+def _deduplicate(frame: pd.DataFrame) -> tuple[pd.DataFrame, int]:
+    keys = [c for c in IDENTITY_COLUMNS if c in frame.columns]
+    if "trial" not in keys and "seed" not in keys:
+        return frame.reset_index(drop=True), 0  # no episode identity to compare: keep every row
+    identity = frame[keys].astype(str)
+    duplicated = identity.duplicated(keep="first")
+    return frame[~duplicated].reset_index(drop=True), int(duplicated.sum())
+
+
+def _record_files(run_dir: Path, excluded: Path | None) -> list[Path]:
+    if run_dir.is_file():
+        if run_dir.suffix != ".parquet":
+            raise InputError(f"expected a run directory or a .parquet file of episode records, got {run_dir}")
+        return [run_dir]
+    folders = [run_dir] + [run_dir / sub for sub in RECORD_SUBDIRS if (run_dir / sub).is_dir()]
+    files = []
+    for folder in folders:
+        if excluded is not None and folder.resolve() == excluded:
+            continue
+        files += sorted(
+            p for p in folder.glob("*.parquet")
+            if p.is_file() and not p.name.startswith(".") and p.name not in NOT_RECORD_FILES
+        )
+    # A consolidated episodes.parquet is read first, so its rows win over identical shard rows.
+    return sorted(files, key=lambda p: (p.name != "episodes.parquet", str(p)))
+
+
+def _find_trials(base: Path, excluded: Path | None) -> Path | None:
+    for depth in range(3):
+        for name in TRIALS_FILES:
+            pattern = "/".join(["*"] * depth + [name])
+            hits = sorted(
+                p for p in base.glob(pattern)
+                if excluded is None or excluded not in p.resolve().parents
+            )
+            if hits:
+                return hits[0]
+    return None
+
+
+def _find_best_params(folder: Path) -> Path | None:
+    candidates = [folder / "best_params.yaml", *sorted(folder.glob("best*.yaml")), *sorted(folder.glob("best*.yml"))]
+    return next((p for p in candidates if p.is_file()), None)
+
+
+def _read_table(path: Path) -> pd.DataFrame:
+    try:
+        if path.suffix == ".csv":
+            return pd.read_csv(path)
+        return pd.read_parquet(path)
+    except Exception as exc:  # pyarrow and pandas raise many types for damaged files
+        raise StorageError(f"cannot read {path}: {type(exc).__name__}: {exc}") from None
+
+
+def _read_yaml(path: Path) -> dict[str, Any]:
+    try:
+        loaded = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise StorageError(f"cannot read {path}: {exc}") from None
+    return loaded if isinstance(loaded, dict) else {"value": loaded}
+
+
+def _read_configs(base: Path, *beside: Path | None) -> dict[str, str]:
+    folders = [base] + [p.parent for p in beside if p is not None and p.parent != base]
+    configs = {}
+    for folder in dict.fromkeys(folders):
+        for path in sorted([*folder.glob("*.yaml"), *folder.glob("*.yml")]):
+            text = path.read_text(errors="replace")
+            if len(text) > MAX_CONFIG_CHARS:
+                text = text[:MAX_CONFIG_CHARS] + f"\n# ... truncated ({len(text)} characters in all)\n"
+            configs[_relative(path, base)] = text
+    return configs
+
+
+def _read_provenance(base: Path, trials_file: Path | None) -> dict[str, Any]:
+    folders = [base] + ([trials_file.parent] if trials_file is not None and trials_file.parent != base else [])
+    provenance = {}
+    for folder in folders:
+        path = folder / "provenance.json"
+        if path.is_file():
+            try:
+                provenance[_relative(path, base)] = json.loads(path.read_text())
+            except (OSError, json.JSONDecodeError) as exc:
+                raise StorageError(f"cannot read {path}: {exc}") from None
+    return provenance
+
+
+def _relative(path: Path, base: Path) -> str:
+    try:
+        return str(path.relative_to(base))
+    except ValueError:
+        return str(path)

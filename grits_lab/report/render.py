@@ -1,0 +1,145 @@
+"""Writers: one report model rendered as Markdown, LaTeX (booktabs), CSV and one self-contained HTML page.
+
+The report model is a list of Sections holding tables, figures and preformatted text; each
+writer walks the same model, so the formats cannot disagree about what the report contains.
+The HTML page embeds its figures as base64 data URIs and its style inline: it opens offline,
+can be mailed as one file, and references nothing outside itself.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Union
+
+import pandas as pd
+
+from grits_lab.io import write_text_atomic
+from grits_lab.report.tables import ReportTable
+from grits_lab.report.vocabulary import MISSING
+
+
+@dataclass
+class ReportFigure:
+    key: str
+    title: str
+    caption: str
+    path: Path
+
+
+@dataclass
+class Preformatted:
+    title: str
+    text: str
+    language: str = ""
+
+
+@dataclass
+class Section:
+    title: str
+    items: list[Union[ReportTable, ReportFigure, Preformatted, str]] = field(default_factory=list)
+
+
+def write_csv(table: ReportTable, path: Path) -> Path:
+    write_text_atomic(path, table.data.to_csv(index=False))
+    return path
+
+
+def table_latex(table: ReportTable) -> str:
+    """A booktabs table environment; cells and headers escaped for LaTeX."""
+    frame = table.display if not table.display.empty else pd.DataFrame({"": [MISSING]})
+    styler = frame.style.hide(axis="index").format(escape="latex").format_index(escape="latex", axis=1)
+    body = styler.to_latex(hrules=True, column_format="l" * frame.shape[1])
+    caption = _latex_escape(f"{table.title}. {table.caption}")
+    return (
+        "% needs \\usepackage{booktabs,graphicx}\n"
+        "\\begin{table}[t]\n\\centering\n"
+        f"\\caption{{{caption}}}\n\\label{{tab:{table.key}}}\n"
+        f"\\resizebox{{\\linewidth}}{{!}}{{%\n{body}}}\n"
+        "\\end{table}\n"
+    )
+
+
+def render_markdown(title: str, sections: list[Section], out_dir: Path) -> str:
+    lines = [f"# {title}", ""]
+    for section in sections:
+        lines += [f"## {section.title}", ""]
+        for item in section.items:
+            if isinstance(item, ReportTable):
+                lines += [f"### {item.title}", "", item.caption, ""]
+                lines += [_markdown_table(item.display), ""]
+                lines += [f"- {note}" for note in item.notes]
+                lines += [f"- Files: csv/{item.key}.csv, latex/{item.key}.tex", ""]
+            elif isinstance(item, ReportFigure):
+                rel = item.path.relative_to(out_dir) if item.path.is_relative_to(out_dir) else item.path
+                lines += [f"![{item.title}]({rel})", "", f"*{item.title}.* {item.caption}", ""]
+            elif isinstance(item, Preformatted):
+                lines += [f"**{item.title}**", "", f"```{item.language}", item.text.rstrip(), "```", ""]
+            else:
+                lines += [item, ""]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def render_html(title: str, sections: list[Section]) -> str:
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>{html.escape(title)}</title>",
+        f"<style>{_CSS}</style></head><body>",
+        f"<h1>{html.escape(title)}</h1>",
+        '<nav><ol>' + "".join(f'<li><a href="#s{i}">{html.escape(s.title)}</a></li>' for i, s in enumerate(sections)) + "</ol></nav>",
+    ]
+    for i, section in enumerate(sections):
+        parts.append(f'<section id="s{i}"><h2>{html.escape(section.title)}</h2>')
+        for item in section.items:
+            if isinstance(item, ReportTable):
+                parts.append(f"<h3>{html.escape(item.title)}</h3><p class=caption>{html.escape(item.caption)}</p>")
+                frame = item.display if not item.display.empty else pd.DataFrame({"": [MISSING]})
+                parts.append(frame.to_html(index=False, escape=True, border=0, na_rep=MISSING, classes="data"))
+                if item.notes:
+                    parts.append("<ul class=notes>" + "".join(f"<li>{html.escape(n)}</li>" for n in item.notes) + "</ul>")
+            elif isinstance(item, ReportFigure):
+                encoded = base64.b64encode(item.path.read_bytes()).decode("ascii")
+                parts.append(
+                    f'<figure><img alt="{html.escape(item.title)}" src="data:image/png;base64,{encoded}">'
+                    f"<figcaption><b>{html.escape(item.title)}.</b> {html.escape(item.caption)}</figcaption></figure>"
+                )
+            elif isinstance(item, Preformatted):
+                parts.append(f"<details><summary>{html.escape(item.title)}</summary><pre>{html.escape(item.text)}</pre></details>")
+            else:
+                parts.append(f"<p>{html.escape(item)}</p>")
+        parts.append("</section>")
+    parts.append("</body></html>")
+    return "\n".join(parts) + "\n"
+
+
+def to_json_text(value: object) -> str:
+    return json.dumps(value, indent=2, sort_keys=False, default=str)
+
+
+def _markdown_table(frame: pd.DataFrame) -> str:
+    if frame.empty:
+        return f"| |\n|---|\n| {MISSING} |"
+    cleaned = frame.astype(str).apply(lambda col: col.str.replace("|", "\\|").str.replace("\n", "<br>"))
+    return cleaned.to_markdown(index=False)
+
+
+def _latex_escape(text: str) -> str:
+    replacements = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#",
+                    "_": r"\_", "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}"}
+    return "".join(replacements.get(ch, ch) for ch in text)
+
+
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}
+h1{font-size:1.6em}h2{border-bottom:2px solid #ddd;padding-bottom:.2em;margin-top:2em}h3{margin-bottom:.2em}
+table.data{border-collapse:collapse;font-size:.82em;margin:.5em 0;display:block;overflow-x:auto}
+table.data th,table.data td{border-bottom:1px solid #e3e3e3;padding:.25em .6em;text-align:left;white-space:nowrap}
+table.data thead th{border-bottom:2px solid #999;background:#f6f6f6}
+p.caption{color:#555;font-size:.9em;margin-top:0}ul.notes{color:#555;font-size:.85em}
+figure{margin:1em 0}figure img{max-width:100%;border:1px solid #eee}figcaption{font-size:.85em;color:#555}
+pre{background:#f6f6f6;padding:.8em;overflow-x:auto;font-size:.8em}nav ol{columns:2;font-size:.9em}
+"""

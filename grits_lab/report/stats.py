@@ -1,0 +1,63 @@
+"""Rates with Wilson score intervals, the only statistics the report computes from episode outcomes.
+
+The Wilson interval is used instead of the normal approximation because evaluation cells are
+small (5 trials per food and level) and rates are often 0 or 1, where the normal interval
+collapses to zero width and claims a certainty ten trials cannot give.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+Z_95 = 1.959963984540054  # two-sided 95% quantile of the standard normal
+
+
+@dataclass(frozen=True)
+class Rate:
+    """`k` of `n` episodes; rate and interval are NaN when there are no episodes (missing, not zero)."""
+
+    k: int
+    n: int
+    rate: float
+    low: float
+    high: float
+
+    @property
+    def missing(self) -> bool:
+        return self.n == 0
+
+
+def wilson_interval(k: int, n: int, z: float = Z_95) -> tuple[float, float]:
+    """Wilson score interval for a binomial proportion k/n; (nan, nan) when n == 0."""
+    if k < 0 or n < 0 or k > n:
+        raise ValueError(f"need 0 <= k <= n, got k={k}, n={n}")
+    if n == 0:
+        return math.nan, math.nan
+    p = k / n
+    z2 = z * z
+    denominator = 1.0 + z2 / n
+    centre = (p + z2 / (2 * n)) / denominator
+    half = (z / denominator) * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n))
+    # 0/n and n/n have bounds of exactly 0 and 1; clamping removes the floating-point residue.
+    low = 0.0 if k == 0 else max(0.0, centre - half)
+    high = 1.0 if k == n else min(1.0, centre + half)
+    return low, high
+
+
+def rate(k: int, n: int) -> Rate:
+    low, high = wilson_interval(int(k), int(n))
+    return Rate(int(k), int(n), k / n if n else math.nan, low, high)
+
+
+def format_rate(r: Rate, missing: str = "—") -> str:
+    """`82.0% [73.3, 88.3] (82/100)`: percent, Wilson 95% interval in percent, counts."""
+    if r.missing:
+        return missing
+    return f"{100 * r.rate:.1f}% [{100 * r.low:.1f}, {100 * r.high:.1f}] ({r.k}/{r.n})"
+
+
+def format_percent(value: float | None, missing: str = "—") -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return missing
+    return f"{100 * value:.1f}%"

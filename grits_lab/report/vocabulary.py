@@ -1,0 +1,86 @@
+"""The report's fixed vocabulary: method and food display names, orders, and the paper's numbers.
+
+Everything a reader compares across reports (names, abbreviations, the order of rows, the
+real-robot numbers of the paper) is defined once here so that every table and figure agrees.
+"""
+
+from __future__ import annotations
+
+METHOD_NAMES: dict[str, str] = {
+    "rule_based": "Rule-based",
+    "bc": "Behavior cloning",
+    "scone": "SCONE",
+    "dp": "Diffusion Policy",
+    "dp_post": "Diffusion Policy (Post.)",
+    "grits": "GRITS",
+    "grits_raw": "GRITS (raw cloud)",
+    "grits_pointnet2": "GRITS (PointNet++)",
+}
+
+# Paper Fig. 5 compares these methods, in this order.
+MAIN_METHODS = ("rule_based", "bc", "scone", "dp", "dp_post", "grits")
+# Paper Fig. 8: the predictor ablation, weakest variant first as in the paper's caption.
+ABLATION_METHODS = ("grits_raw", "grits_pointnet2", "grits")
+# Paper Fig. 6: vanilla diffusion policy (left) against GRITS (right).
+PER_FOOD_METHODS = ("dp", "grits")
+
+# The ten unseen test foods in the paper's order, with the abbreviations of its Fig. 6.
+FOOD_ABBREVIATIONS: dict[str, str] = {
+    "sago": "SA",
+    "red_bean": "RB",
+    "mentos": "MT",
+    "marshmallow": "MM",
+    "fudge": "FD",
+    "penne": "PE",
+    "prune": "PR",
+    "ramen_snack": "RS",
+    "nuts": "NU",
+    "milk_tea": "MK",
+}
+UNSEEN_FOODS = tuple(FOOD_ABBREVIATIONS)
+
+LEVEL_ORDER = ("low", "medium", "high")
+
+OUTCOME_NAMES: dict[str, str] = {
+    "task_success": "Task success",
+    "spillage": "Spillage",
+    "scoop_failure": "Scoop failure",
+}
+
+# Real-robot results of the paper (SPEC.md, "Headline results"): fraction of trials, over
+# 10 unseen foods x 2 levels x 5 trials = 100 trials per method. Only numbers the paper states.
+PAPER_RESULTS: dict[str, dict[str, float]] = {
+    "grits": {"task_success": 0.82, "spillage": 0.04, "scoop_failure": 0.14},
+    "dp_post": {"spillage": 0.08, "scoop_failure": 0.40},
+}
+PAPER_TRIALS_PER_METHOD = 100
+# "GRITS reduces spillage by more than 40% relative to diffusion policy without guidance."
+PAPER_SPILLAGE_REDUCTION_VS_DP = 0.40
+
+SIM_LABEL = "simulation"
+PAPER_LABEL = "real robot (paper)"
+MISSING = "—"
+
+
+def canonical_name(name: object) -> str:
+    """`Red Bean`, `red-bean` and `red_bean` name the same food; records may use any of them."""
+    return str(name).strip().lower().replace(" ", "_").replace("-", "_")
+
+
+def method_display(method: str) -> str:
+    return METHOD_NAMES.get(method, method)
+
+
+def food_display(food: str, long: bool = False) -> str:
+    """`SA` (or `SA sago` with long=True) for a paper food; the record's own name otherwise."""
+    abbreviation = FOOD_ABBREVIATIONS.get(canonical_name(food))
+    if abbreviation is None:
+        return str(food)
+    return f"{abbreviation} {canonical_name(food).replace('_', ' ')}" if long else abbreviation
+
+
+def ordered(values: object, preferred: tuple[str, ...]) -> list[str]:
+    """`values` with those in `preferred` first (in that order), the rest sorted after them."""
+    present = {str(v) for v in values}
+    head = [v for v in dict.fromkeys(preferred) if v in present]
+    return head + sorted(present - set(head))
