@@ -7,7 +7,6 @@ trajectory into P(spill).
 
 from __future__ import annotations
 
-import io
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,9 +17,10 @@ import torch
 from grits_lab.config import config_from_dict, config_to_dict
 from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import ConfigError, StorageError
-from grits_lab.io import write_bytes_atomic
 from grits_lab.spillage.config import PredictorConfig
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
+from grits_lab.training.checkpoint import load_checkpoint
+from grits_lab.training.checkpoint import save_checkpoint as write_checkpoint
 
 CHECKPOINT_FORMAT = "grits-spillage-predictor/1"
 
@@ -63,19 +63,11 @@ def save_checkpoint(path: str | Path, *, config: PredictorConfig, model: Spillag
         "cloud_normalizer": cloud_normalizer.state_dict(),
         **(extra or {}),
     }
-    buffer = io.BytesIO()
-    torch.save(payload, buffer)
-    write_bytes_atomic(path, buffer.getvalue())
+    write_checkpoint(path, payload)
 
 
 def read_checkpoint(path: str | Path) -> dict[str, Any]:
-    path = Path(path)
-    if not path.is_file():
-        raise StorageError(f"predictor checkpoint not found: {path}")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as exc:  # torch raises several unrelated types for a damaged file
-        raise StorageError(f"corrupted or unreadable predictor checkpoint {path}: {exc}") from None
+    payload = load_checkpoint(path)
     if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
         raise StorageError(f"{path} is not a spillage predictor checkpoint")
     return payload
