@@ -17,13 +17,13 @@ from grits_lab.errors import GritsError
 
 # Modules that register top-level subcommands.
 COMMAND_MODULES = [
-    "grits_lab.tune.commands",
     "grits_lab.report.commands",
 ]
 
 # Modules that register `grits-lab train <what>` subcommands.
 TRAIN_MODULES = [
     "grits_lab.spillage.commands",
+    "grits_lab.policies.commands",
 ]
 
 
