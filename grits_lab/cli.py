@@ -17,6 +17,7 @@ from grits_lab.errors import GritsError
 
 # Modules that register top-level subcommands.
 COMMAND_MODULES = [
+    "grits_lab.tune.commands",
     "grits_lab.report.commands",
 ]
 
