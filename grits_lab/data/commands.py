@@ -1,0 +1,59 @@
+"""`grits-lab collect CONFIG` and `grits-lab dataset info PATH`: dataset generation and inspection."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+
+def register(subparsers: Any) -> None:
+    collect = subparsers.add_parser(
+        "collect",
+        help="generate a dataset (demonstrations or spillage trials) from an experiments/*.yaml config",
+        description="Generate a dataset in parallel. Re-running the same command resumes an interrupted job.",
+    )
+    collect.add_argument("config", help="collection config, e.g. experiments/demos_quick.yaml")
+    collect.add_argument("--output", help="dataset directory (overrides `output:` in the config)")
+    collect.add_argument("--workers", type=int, help="number of parallel workers (overrides executor.workers)")
+    collect.add_argument("--address", help="Ray cluster address (overrides executor.address and RAY_ADDRESS)")
+    collect.add_argument("--serial", action="store_true", help="run in this process, without Ray")
+    collect.add_argument("--no-progress", action="store_true", help="no progress bar (logs, CI)")
+    collect.set_defaults(handler=_collect)
+
+    dataset = subparsers.add_parser("dataset", help="inspect datasets")
+    dataset_sub = dataset.add_subparsers(dest="dataset_command", metavar="ACTION")
+    info = dataset_sub.add_parser("info", help="counts by food, shape and label; size on disk")
+    info.add_argument("path", help="dataset directory")
+    info.add_argument("--json", action="store_true", help="print JSON instead of text")
+    info.set_defaults(handler=_info)
+    dataset.set_defaults(handler=lambda args: (dataset.print_help(), 2)[1])
+
+
+def _collect(args: argparse.Namespace) -> int:
+    from grits_lab.data.jobs import load_collect_config, run_collection
+
+    config = load_collect_config(args.config)
+    if args.output:
+        config.output = args.output
+    if args.workers is not None:
+        if args.workers < 1:
+            from grits_lab.errors import InputError
+
+            raise InputError(f"--workers must be at least 1. Got {args.workers}.")
+        config.executor.workers = args.workers
+    if args.address:
+        config.executor.address = args.address
+    if args.serial:
+        config.executor.backend = "serial"
+    summary = run_collection(config, progress=not args.no_progress)
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+def _info(args: argparse.Namespace) -> int:
+    from grits_lab.data.info import dataset_summary, format_summary
+
+    summary = dataset_summary(args.path)
+    print(json.dumps(summary, indent=2) if args.json else format_summary(summary))
+    return 0

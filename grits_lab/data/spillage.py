@@ -1,0 +1,289 @@
+"""Spillage dataset: shifted mean-expert trajectories over random primitive foods, labelled by simulation, balanced.
+
+A candidate trial (shape, k) draws its particle parameters and its trajectory shift from its own
+seed, runs the trajectory, and records the spilled count at every waypoint. The trajectory is cut
+into chunks of `chunk_len` waypoints (the policy's n_action_steps); each chunk stores the composite
+and raw clouds observed at its start and whether the spilled count rose during it (contract 4).
+The label is 1 if any chunk spilled. Candidates are accepted in index order per shape until every
+(shape, label) bucket is full (`grits_lab.data.balance`); the acceptance rate is reported.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from grits_lab.config import config_from_dict, config_to_dict, require
+from grits_lab.perception.composite import CloudConfig
+from grits_lab.runners.config import ExecutorConfig
+from grits_lab.runners.spec import EpisodeSpec
+from grits_lab.seeding import derive_seed, make_rng
+
+SHAPES = ["sphere", "cube", "cone", "cylinder"]
+
+
+@dataclass
+class ParticleRanges:
+    # The authors' generator: radius / half length 2.5-10 mm, mass 0.1-5 g, friction 0-1, whole
+    # layers of 16 particles (capped by the bowl's capacity in grits_lab.sim.foods.primitive_food).
+    radius: tuple[float, float] = (0.0025, 0.010)
+    mass: tuple[float, float] = (0.0001, 0.005)
+    friction: tuple[float, float] = (0.0, 1.0)
+    layer_size: int = 16
+    layers: tuple[int, int] = (4, 12)
+
+    def __post_init__(self) -> None:
+        for key in ("radius", "mass", "friction"):
+            lo, hi = getattr(self, key)
+            require(0 <= lo <= hi, f"particles.{key}", [lo, hi], "a range [low, high] with 0 <= low <= high")
+        require(self.layer_size >= 1, "particles.layer_size", self.layer_size, "at least 1")
+        require(1 <= self.layers[0] <= self.layers[1], "particles.layers", list(self.layers), "a range [low, high] with 1 <= low <= high")
+
+
+@dataclass
+class ShiftConfig:
+    # Uniform shift of the mean trajectory's positions (paper: +-7 cm X, +-5 cm Y and Z).
+    x: float = 0.07
+    y: float = 0.05
+    z: float = 0.05
+    # The spoon's centre stays this far inside the bowl's inner wall (half the spoon's width).
+    clearance: float = 0.02
+    ramp_steps: int = 5
+
+    def __post_init__(self) -> None:
+        for key in ("x", "y", "z", "clearance"):
+            require(getattr(self, key) >= 0, f"shift.{key}", getattr(self, key), "non-negative")
+
+
+@dataclass
+class SpillageConfig:
+    kind: Literal["spillage"] = "spillage"
+    output: str = "results/datasets/spillage"
+    seed: int = 0
+    trials: int = 4000
+    spill_fraction: float = 0.5
+    shapes: list[str] = field(default_factory=lambda: list(SHAPES))
+    chunk_len: int = 12
+    # Base trajectory: a (T, 9)/(T, 7) .npy file or a demonstrations dataset directory (the mean
+    # of its `action`s); null = the mean of `base_expert_plans` scripted-expert plans.
+    base_trajectory: str | None = None
+    base_expert_plans: int = 16
+    base_food: str = "mung_beans"
+    base_level: str = "medium"
+    # Candidates tried per shape before giving up on unfilled buckets, as a multiple of the
+    # shape's share of `trials`.
+    max_candidates_factor: float = 20.0
+    raw_cloud: bool = True
+    particles: ParticleRanges = field(default_factory=ParticleRanges)
+    shift: ShiftConfig = field(default_factory=ShiftConfig)
+    sim: dict[str, Any] = field(default_factory=dict)
+    cloud: CloudConfig = field(default_factory=CloudConfig)
+    executor: ExecutorConfig = field(default_factory=ExecutorConfig)
+
+    def __post_init__(self) -> None:
+        require(self.trials >= 1, "trials", self.trials, "at least 1")
+        require(0 <= self.spill_fraction <= 1, "spill_fraction", self.spill_fraction, "in [0, 1]")
+        require(len(self.shapes) >= 1 and set(self.shapes) <= set(SHAPES), "shapes", self.shapes, f"a non-empty subset of {SHAPES}")
+        require(self.trials % len(self.shapes) == 0, "trials", self.trials, f"a multiple of the number of shapes ({len(self.shapes)})")
+        require(self.chunk_len >= 1, "chunk_len", self.chunk_len, "at least 1")
+        require(self.base_expert_plans >= 1, "base_expert_plans", self.base_expert_plans, "at least 1")
+        require(self.max_candidates_factor >= 1, "max_candidates_factor", self.max_candidates_factor, "at least 1")
+
+    def identity(self) -> dict[str, Any]:
+        d = config_to_dict(self)
+        d.pop("executor")
+        d.pop("output")
+        return d
+
+    def targets(self) -> dict[str, tuple[int, int]]:
+        """(no-spill, spill) trials per shape: 4000 at 0.5 -> 500 / 500 for each of 4 shapes."""
+        per_shape = self.trials // len(self.shapes)
+        spill = int(round(per_shape * self.spill_fraction))
+        return {shape: (per_shape - spill, spill) for shape in self.shapes}
+
+
+@dataclass
+class SpillageTrialParams:
+    """What a worker needs for one candidate trial besides the spec's seed and trajectory."""
+
+    sim: Any
+    cloud: CloudConfig
+    particles: ParticleRanges
+    shape: str
+    chunk_len: int
+    raw_cloud: bool
+    shift: list[float]
+    shift_scale: float
+
+
+CANDIDATE_LOG = "candidates.jsonl"
+BASE_TRAJECTORY_FILE = "base_trajectory.npy"
+
+
+def candidate_id(shape: str, index: int) -> str:
+    return f"{shape}-{index:06d}"
+
+
+def chunk_labels(spilled_over_time: np.ndarray, chunk_len: int, spilled_before: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(chunk_start (C,), chunk_spilled (C,)) from the spilled count after each waypoint (T,).
+
+    A chunk spilled if the count at its end exceeds the count just before its first waypoint.
+    """
+    counts = np.asarray(spilled_over_time, dtype=np.int64)
+    starts = np.arange(0, len(counts), chunk_len, dtype=np.int32)
+    before = np.concatenate([[spilled_before], counts])
+    ends = np.minimum(starts + chunk_len, len(counts))
+    return starts, before[ends] > before[starts]
+
+
+class CandidateLog:
+    """Append-only record of every decided candidate (JSON lines), so a resumed job does not re-run them.
+
+    A torn last line (the job was killed while writing it) is ignored; that candidate is decided
+    again from its episode file or by re-running it.
+    """
+
+    def __init__(self, path: Path):
+        self.path = path
+
+    def read(self) -> dict[str, dict[str, Any]]:
+        out: dict[str, dict[str, Any]] = {}
+        if not self.path.exists():
+            return out
+        for line in self.path.read_text().splitlines():
+            try:
+                rec = json.loads(line)
+                out[rec["id"]] = rec
+            except (json.JSONDecodeError, KeyError, TypeError):
+                continue
+        return out
+
+    def append(self, record: dict[str, Any]) -> None:
+        import os
+
+        with open(self.path, "a") as fh:
+            fh.write(json.dumps(record, sort_keys=True) + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+
+
+def make_trial_spec(config: SpillageConfig, sim: Any, base: np.ndarray, bowl: dict[str, Any], shape: str, index: int) -> EpisodeSpec:
+    """The spec of candidate (shape, index): its seed, its shifted trajectory and its parameters."""
+    from grits_lab.data.trajectories import shift_trajectory
+
+    seed = derive_seed(config.seed, "spillage", shape, index)
+    rng = make_rng(derive_seed(seed, "shift"))
+    s = config.shift
+    shift = rng.uniform(-1.0, 1.0, 3) * np.array([s.x, s.y, s.z])
+    traj, scale = shift_trajectory(
+        base, shift, bowl["center"], bowl["inner_radius_at"], bowl["rim_height"], bowl["floor_height"],
+        clearance=s.clearance, ramp_steps=s.ramp_steps,
+    )
+    params = SpillageTrialParams(
+        sim=sim, cloud=config.cloud, particles=config.particles, shape=shape, chunk_len=config.chunk_len,
+        raw_cloud=config.raw_cloud, shift=[float(v) for v in shift], shift_scale=float(scale),
+    )
+    return EpisodeSpec(
+        episode_id=candidate_id(shape, index), work="spillage", seed=seed, trajectory=traj.astype(np.float32),
+        params={"trial": params},
+    )
+
+
+def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: np.ndarray, bowl: dict[str, Any], progress: bool = True) -> dict[str, Any]:
+    """Generate candidates until every (shape, label) bucket is full; write accepted trials."""
+    from grits_lab.config import config_from_dict
+    from grits_lab.data.balance import BalancedAcceptor
+    from grits_lab.data.collect import Progress, failure_record
+    from grits_lab.sim import SimConfig
+
+    sim = config_from_dict(SimConfig, config.sim, "sim")
+    targets = config.targets()
+    per_shape = config.trials // len(config.shapes)
+    acceptor = BalancedAcceptor(targets, max_candidates=int(np.ceil(per_shape * config.max_candidates_factor)))
+    log = CandidateLog(writer.out_dir / CANDIDATE_LOG)
+    logged = log.read()
+    on_disk = writer.finished()
+    stats = {"tried": 0, "spilled": 0, "failed": 0}
+    bar = Progress(total=config.trials, initial=0, desc="spillage", enabled=progress)
+
+    def decide(decisions: list, from_log: bool) -> None:
+        for d in decisions:
+            cid = candidate_id(d.shape, d.index)
+            stats["tried"] += 1
+            stats["failed"] += int(d.label is None)
+            stats["spilled"] += int(d.label == 1)
+            if d.accepted and d.payload is not None:
+                writer.write(cid, d.payload)
+            elif not d.accepted and cid in on_disk:
+                (writer.out_dir / "episodes" / f"{cid}.npz").unlink(missing_ok=True)
+            if not from_log:
+                log.append({"id": cid, "shape": d.shape, "index": d.index, "label": d.label, "accepted": d.accepted})
+            if d.accepted:
+                bar.spilled, bar.labelled = stats["spilled"], stats["tried"] - stats["failed"]
+                bar.update(accept=f"{sum(sum(c.values()) for c in acceptor.counts().values()) / stats['tried']:.2f}")
+
+    # Resume: replay decided candidates in index order (from the log, else from an episode file
+    # written just before an interruption), so the acceptor ends where the last run stopped.
+    for shape in config.shapes:
+        k = 0
+        while True:
+            cid = candidate_id(shape, k)
+            if cid in logged:
+                acceptor.skip_to(shape, k + 1)
+                decide(acceptor.add(shape, k, logged[cid]["label"]), from_log=True)
+            elif cid in on_disk:
+                acceptor.skip_to(shape, k + 1)
+                decide(acceptor.add(shape, k, int(on_disk[cid]["label"])), from_log=False)
+            else:
+                break
+            k += 1
+
+    in_flight: dict[str, str] = {}
+    start = time.perf_counter()
+    try:
+        while not acceptor.done():
+            while executor.capacity() > 0:
+                by_shape: dict[str, int] = {}
+                for sh in in_flight.values():
+                    by_shape[sh] = by_shape.get(sh, 0) + 1
+                nxt = acceptor.next_candidate(by_shape)
+                if nxt is None:
+                    break
+                spec = make_trial_spec(config, sim, base, bowl, *nxt)
+                executor.submit(spec)
+                in_flight[spec.episode_id] = nxt[0]
+            if executor.pending() == 0:
+                break
+            for result in executor.poll():
+                shape = in_flight.pop(result.episode_id)
+                index = int(result.episode_id.rsplit("-", 1)[1])
+                if result.ok:
+                    label = int(result.payload["meta"]["label"])
+                    payload = result.payload
+                else:
+                    label, payload = None, None
+                    writer.write_failure(result.episode_id, failure_record(result))
+                decide(acceptor.add(shape, index, label, payload), from_log=False)
+    finally:
+        bar.close()
+    counts = acceptor.counts()
+    accepted = sum(sum(c.values()) for c in counts.values())
+    labelled = stats["tried"] - stats["failed"]
+    summary = {
+        "trials": accepted,
+        "requested": config.trials,
+        "buckets": {f"{shape}/{label}": n for shape, c in counts.items() for label, n in c.items()},
+        "targets": {f"{shape}/{label}": t[label] for shape, t in targets.items() for label in (0, 1)},
+        "candidates_tried": stats["tried"],
+        "candidates_failed": stats["failed"],
+        "acceptance_rate": round(accepted / stats["tried"], 4) if stats["tried"] else None,
+        "spill_rate_of_candidates": round(stats["spilled"] / labelled, 4) if labelled else None,
+        "wall_time_s_this_time": round(time.perf_counter() - start, 2),
+    }
+    writer.finalize(summary, complete=all(acceptor.full(s) for s in config.shapes))
+    return summary
