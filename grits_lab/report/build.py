@@ -38,6 +38,7 @@ from grits_lab.report.tables import (
     claims_table,
     method_table,
     per_food_table,
+    setting_table,
 )
 from grits_lab.report.vocabulary import ABLATION_METHODS, MAIN_METHODS, PAPER_LABEL, SIM_LABEL
 
@@ -81,7 +82,15 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Repo
 def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Section]:
     episodes = run.episodes
     sections = []
-    if episodes is not None:
+    if episodes is not None and is_sweep_records(run):
+        # Records of sweep trials evaluate one method at many (rho, s): the paper's figures would
+        # pool or multiply them, so they are summarized per setting instead.
+        sections.append(Section("Sweep: per guidance setting", [
+            "These records are the sweep's per-trial evaluation records; the paper's figures (Fig. 5, 6, 8) "
+            "are drawn from `grits-lab evaluate` runs.",
+            _table(setting_table(episodes), out, result),
+        ]))
+    elif episodes is not None:
         claims = claims_table(episodes)
         fig5 = method_table(episodes, MAIN_METHODS, "fig5_overall", "Fig. 5: task success, spillage and scoop failure",
                             "Every method over all evaluated foods and quantity levels.", extra=True)
@@ -118,11 +127,22 @@ def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Sec
         summary = summarize_sweep(run.trials, run.best_params)
         best_file = str(run.best_params_file) if run.best_params_file else None
         items = [_table(t, out, result) for t in sweep_tables(summary, run.best_params, best_file)]
+        if run.best_params_text:
+            # The file as written: its comments say how the best trial was chosen and how it compares.
+            items.append(Preformatted(f"Best parameters file: {best_file}", run.best_params_text, "yaml"))
         front = figures.sweep_front(summary, out / "figures" / "sweep_front.png")
         if front is not None:
             items.append(_figure("sweep_front", "Sweep: objectives of completed trials", "Red: Pareto front; star: the paper's defaults.", front, result))
         sections.append(Section(f"Sweep summary ({run.trials_file})", items))
     return sections
+
+
+def is_sweep_records(run: RunData) -> bool:
+    """True when every record file lies in the records/ folder beside the sweep's trials table."""
+    if run.trials_file is None or not run.episode_files:
+        return False
+    sweep_records = (run.trials_file.parent / "records").resolve()
+    return all(p.resolve().parent == sweep_records for p in run.episode_files)
 
 
 def _provenance_section(run: RunData, out: Path, result: ReportResult) -> Section:

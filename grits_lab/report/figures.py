@@ -135,8 +135,7 @@ def breakdown_heatmap(wide: dict[str, pd.DataFrame], variants: list[tuple[str, s
         values = np.array([[frame[f"{v}_rate"].iloc[r] for v, _ in variants] for r in range(len(frame))], dtype=float)
         masked = np.ma.masked_invalid(values)
         # Light sequential maps keep the k/n text legible; green = good outcome, red = bad.
-        cmap = plt.get_cmap("Greens" if outcome == "task_success" else "Reds").copy()
-        cmap.set_bad("white")
+        cmap = plt.get_cmap("Greens" if outcome == "task_success" else "Reds").with_extremes(bad="white")
         image = ax.imshow(masked, cmap=cmap, vmin=0, vmax=1.4, aspect="auto")
         for r in range(values.shape[0]):
             for c, (variant, _) in enumerate(variants):
@@ -165,9 +164,12 @@ def sweep_front(summary: SweepSummary, path: Path) -> Path | None:
         ax.scatter(complete[x_col], complete[y_col], s=22, color="0.6", label="completed trial")
         front = complete[complete["pareto"]].sort_values(x_col)
         ax.plot(front[x_col], front[y_col], "-o", color="#d1495b", markersize=5, label="Pareto front")
-        for _, row in front.iterrows():
-            ax.annotate(_params_label(row, summary.parameters), (row[x_col], row[y_col]), fontsize=6.5,
-                        xytext=(4, 4), textcoords="offset points")
+        # Trials with identical objectives share one point: list their parameters in one label.
+        for (x, y), group in front.groupby([x_col, y_col], sort=False):
+            text = "\n".join(_params_label(row, summary.parameters) for _, row in group.head(4).iterrows())
+            if len(group) > 4:
+                text += f"\n(+{len(group) - 4} more)"
+            ax.annotate(text, (x, y), fontsize=6.5, xytext=(6, -4), textcoords="offset points", va="top")
         ax.set_xlabel(f"{x_col} ({summary.objectives[x_col]})")
         ax.set_ylabel(f"{y_col} ({summary.objectives[y_col]})")
     else:

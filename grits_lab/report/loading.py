@@ -9,8 +9,8 @@ What the report expects in RUN_DIR (written by `grits-lab evaluate` and `grits-l
 * optional run metadata: `config.yaml` (and any other *.yaml at the top level) and
   `provenance.json`, shown verbatim in the report's provenance section.
 * optional sweep outputs anywhere up to two folders below RUN_DIR: a trials table
-  `trials.parquet` (preferred) or `trials.csv`, and a best-parameters YAML (`best_params.yaml` or
-  `best*.yaml`) beside it.
+  `trials.parquet` (preferred) or `trials.csv`, and a best-parameters YAML (`best.yaml`, `best_params.yaml`
+  or `best*.yaml`) beside it.
 
 Records are read, never re-scored: the only change made is that an episode with a non-empty
 `error` has its task success set to False (it counts as a failure and is shown as a count).
@@ -54,6 +54,7 @@ class RunData:
     trials_file: Path | None = None
     best_params: dict[str, Any] | None = None
     best_params_file: Path | None = None
+    best_params_text: str = ""
     configs: dict[str, str] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
 
@@ -82,6 +83,7 @@ def load_run(run_dir: str | Path, exclude: str | Path | None = None) -> RunData:
         data.best_params_file = _find_best_params(data.trials_file.parent)
         if data.best_params_file is not None:
             data.best_params = _read_yaml(data.best_params_file)
+            data.best_params_text = data.best_params_file.read_text(errors="replace")
     if not frames and data.trials is None:
         detail = f"; ignored: {'; '.join(data.ignored_files)}" if data.ignored_files else ""
         raise InputError(

@@ -17,8 +17,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import pandas as pd
-import yaml
-
 from grits_lab.report.tables import ReportTable
 from grits_lab.report.vocabulary import MISSING
 
@@ -28,6 +26,8 @@ NAMED_OBJECTIVES = (
     (("task_success", "success_rate", "success"), "maximize"),
     (("spillage", "spillage_rate"), "minimize"),
 )
+# Shown beside the objectives when the trials table has them (grits_lab/tune writes these).
+CONTEXT_COLUMNS = ("scoop_failure_rate", "n_episodes", "n_errors", "feasible")
 COMPLETE_STATES = {"COMPLETE", "TRIALSTATE.COMPLETE"}
 PAPER_DEFAULTS = {"rho": 2.5, "s": 30}
 
@@ -89,10 +89,11 @@ def sweep_tables(summary: SweepSummary, best_params: dict[str, Any] | None, best
         state_display, pd.DataFrame({"state": states.index, "trials": states.values}), list(summary.notes),
     )]
     columns = ["number", *summary.parameters, *summary.objectives]
+    columns += [c for c in CONTEXT_COLUMNS if c in trials.columns and c not in columns]
     if best_params is not None:
-        text = yaml.safe_dump(best_params, sort_keys=False).strip()
-        best_display = pd.DataFrame({"Source": [best_file or "best parameters YAML"], "Best parameters": [text]})
-        best_data = pd.DataFrame([{"source": best_file, **_flatten(best_params)}])
+        flat = _flatten(best_params)
+        best_display = pd.DataFrame({"Parameter": list(flat), "Value": [_fmt(v) for v in flat.values()]})
+        best_data = pd.DataFrame([{"source": best_file, **flat}])
     else:
         best = _best_trial(summary)
         if best is None:
@@ -106,9 +107,11 @@ def sweep_tables(summary: SweepSummary, best_params: dict[str, Any] | None, best
         "From the sweep's best-parameters YAML when present, otherwise the best completed trial "
         "(single objective) or the front member with the highest first objective.",
         best_display, best_data,
-        [f"Paper defaults: rho = {PAPER_DEFAULTS['rho']}, s = {PAPER_DEFAULTS['s']}."],
+        [f"Source: {best_file or 'the trials table'}. Paper defaults: rho = {PAPER_DEFAULTS['rho']}, s = {PAPER_DEFAULTS['s']}."],
     ))
-    front = summary.complete[summary.complete["pareto"]].sort_values(list(summary.objectives) or ["number"])
+    front = summary.complete[summary.complete["pareto"]]
+    if summary.objectives:
+        front = front.sort_values(list(summary.objectives), ascending=[d == "minimize" for d in summary.objectives.values()])
     notes = [] if len(summary.objectives) >= 2 else ["A single objective has no Pareto front; the best trial is shown."]
     if front.empty:
         notes.insert(0, "Missing: no completed trials with objective values.")

@@ -304,3 +304,24 @@ def _select(episodes: pd.DataFrame | None, **equal: object) -> pd.DataFrame:
     for column, value in equal.items():
         mask &= episodes[column] == value
     return episodes[mask]
+
+
+def setting_table(episodes: pd.DataFrame) -> ReportTable:
+    """Per method and guidance setting (rho, s): rates with Wilson 95% intervals, from sweep trial records."""
+    display_rows, data_rows = [], []
+    for (method, rho, s), rows in episodes.groupby(["method", "rho", "s"], dropna=False, sort=True):
+        rates = outcome_rates(rows)
+        shown = {"Method": method_display(method), "rho": MISSING if pd.isna(rho) else f"{rho:.4g}", "s": str(s),
+                 "Episodes": str(len(rows)), "Errors": str(int(rows["is_error"].sum()))}
+        data = {"method": method, "rho": rho, "s": s, "episodes": len(rows), "errors": int(rows["is_error"].sum())}
+        for outcome, r in rates.items():
+            shown[OUTCOME_NAMES[outcome]] = format_rate(r)
+            data.update({f"{outcome}_k": r.k, f"{outcome}_rate": r.rate, f"{outcome}_ci_low": r.low, f"{outcome}_ci_high": r.high})
+        display_rows.append(shown)
+        data_rows.append(data)
+    return ReportTable(
+        "sweep_settings", "Sweep: outcomes per guidance setting",
+        "Every (rho, s) the sweep evaluated, from its per-episode records: rate [Wilson 95%] (k/n).",
+        pd.DataFrame(display_rows), pd.DataFrame(data_rows),
+        ["Neighbouring settings whose intervals overlap are not distinguishable with these episode counts."],
+    )

@@ -1,0 +1,181 @@
+"""Report layer: known table values and Wilson intervals from fixed records, missing data shown as
+missing, a self-contained HTML page, booktabs LaTeX, sweep Pareto front, and CLI bad input."""
+
+from __future__ import annotations
+
+import base64
+import math
+import re
+
+import pandas as pd
+import pytest
+
+from grits_lab.cli import main
+from grits_lab.errors import InputError
+from grits_lab.report import build_report, load_run, normalize_records, wilson_interval
+from grits_lab.report.sweep import summarize_sweep
+from grits_lab.report.tables import claims_table, method_table, per_food_table
+from grits_lab.report.vocabulary import MAIN_METHODS, MISSING
+from synthetic_records import episode, plausible_run
+
+
+def fixed_records() -> pd.DataFrame:
+    """GRITS: 8 successes, 1 spill, 1 scoop failure on sago. DP: 6 successes, 3 spills, 1 error
+    (recorded as a success, so the error rule must turn it into a failure), no fudge for DP."""
+    rows = []
+    grits = ["success"] * 8 + ["spill", "scoop_fail"]
+    dp = ["success"] * 7 + ["spill"] * 3
+    for i, outcome in enumerate(grits):
+        # The scoop failure spilled first: Fig. 6 must count it as a spillage failure.
+        early = True if outcome == "scoop_fail" else None
+        rows.append(episode("grits", "sago", "low" if i < 5 else "high", i % 5, outcome, spilled_before_scoop=early))
+    for i, outcome in enumerate(dp):
+        rows.append(episode("dp", "sago", "low" if i < 5 else "high", i % 5, outcome, error="sim crashed" if i == 0 else ""))
+    for i in range(4):
+        rows.append(episode("grits", "fudge", "low", i, "success" if i < 3 else "transfer_fail"))
+    return pd.DataFrame(rows)
+
+
+@pytest.fixture(scope="module")
+def records() -> pd.DataFrame:
+    return normalize_records(fixed_records())
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    run = tmp_path_factory.mktemp("run")
+    frame = plausible_run(0, skip={"dp": ["fudge"]})
+    half = len(frame) // 2
+    frame.iloc[:half].to_parquet(run / "part-000.parquet", index=False)
+    frame.iloc[half:].to_parquet(run / "part-001.parquet", index=False)
+    frame.to_parquet(run / "episodes.parquet", index=False)  # consolidated copy beside its shards
+    (run / "config.yaml").write_text("root_seed: 0\ntrials_per_level: 5\n")
+    (run / "provenance.json").write_text('{"git_commit": "feedbeef"}')
+    return run, frame, build_report(run)
+
+
+def test_wilson_interval_matches_hand_computed_values():
+    # p = 0.8, n = 10, z = 1.96: centre (0.8 + z^2/20) / (1 + z^2/10) = 0.7167, half-width 0.2266.
+    assert wilson_interval(8, 10) == pytest.approx((0.4902, 0.9433), abs=1e-4)
+    assert wilson_interval(1, 10) == pytest.approx((0.0179, 0.4042), abs=1e-4)
+    assert wilson_interval(0, 10) == (0.0, pytest.approx(0.2775, abs=1e-4))
+    assert wilson_interval(10, 10) == (pytest.approx(0.7225, abs=1e-4), 1.0)
+    assert all(math.isnan(v) for v in wilson_interval(0, 0))
+
+
+def test_fig5_table_has_known_counts_rates_and_intervals(records):
+    table = method_table(records, MAIN_METHODS, "fig5", "t", "c")
+    data = table.data.set_index("method")
+    grits = data.loc["grits"]
+    assert (grits["episodes"], grits["task_success_k"], grits["spillage_k"], grits["scoop_failure_k"]) == (14, 11, 1, 1)
+    assert grits["task_success_rate"] == pytest.approx(11 / 14)
+    assert (grits["task_success_ci_low"], grits["task_success_ci_high"]) == pytest.approx(wilson_interval(11, 14))
+    assert grits["spillage_paper"] == 0.04 and grits["task_success_paper"] == 0.82
+    dp = data.loc["dp"]
+    # The errored episode was recorded as a success: it must count as a failure and be shown as an error.
+    assert (dp["episodes"], dp["task_success_k"], dp["errors"]) == (10, 6, 1)
+    shown = table.display.set_index("Method")
+    assert shown.loc["GRITS", "Task success (simulation)"] == "78.6% [52.4, 92.4] (11/14)"
+    assert shown.loc["GRITS", "Task success (real robot (paper))"] == "82.0%"
+    assert shown.loc["Diffusion Policy", "Task success (real robot (paper))"] == MISSING
+
+
+def test_missing_method_is_reported_missing_not_zero(records):
+    table = method_table(records, MAIN_METHODS, "fig5", "t", "c")
+    bc = table.data.set_index("method").loc["bc"]
+    assert bc["missing"] and math.isnan(bc["task_success_rate"]) and math.isnan(bc["task_success_k"])
+    row = table.display.set_index("Method").loc["Behavior cloning"]
+    assert row["Task success (simulation)"] == MISSING and row["Episodes"] == MISSING
+    assert "0.0%" not in " ".join(row.astype(str))
+    assert any("Behavior cloning" in n and "SCONE" in n and n.startswith("Missing") for n in table.notes)
+
+
+def test_fig6_counts_spillage_before_scoop_and_marks_missing_food(records):
+    table = per_food_table(records)
+    data = table.data
+    grits_sago = data[(data["method"] == "grits") & (data["food"] == "sago")].set_index("category")["k"]
+    # 8 successes; the spill and the early-spilling scoop failure are both spillage failures.
+    assert grits_sago.to_dict() == {"success": 8, "spillage": 2, "scoop_failure": 0, "other_failure": 0, "error": 0}
+    dp_sago = data[(data["method"] == "dp") & (data["food"] == "sago")].set_index("category")["k"]
+    assert (dp_sago["success"], dp_sago["spillage"], dp_sago["error"]) == (6, 3, 1)
+    dp_fudge = data[(data["method"] == "dp") & (data["food"] == "fudge")]
+    assert dp_fudge["k"].isna().all() and (dp_fudge["episodes"] == 0).all()
+    shown = table.display.set_index("Food")
+    assert shown.loc["FD fudge", "Diffusion Policy: Success"] == MISSING
+    assert shown.loc["FD fudge", "GRITS: Success"] == "3"
+    assert any("Diffusion Policy: " in n and "FD fudge" in n for n in table.notes)
+
+
+def test_claims_compare_spillage_reduction_with_the_paper(records):
+    claims = claims_table(records).data.set_index("quantity")
+    reduction = claims.loc["Spillage reduction, GRITS relative to Diffusion Policy"]
+    assert reduction["simulation"] == pytest.approx(1 - (1 / 14) / (3 / 10))
+    assert reduction["note"] == "holds"
+    assert claims.loc["Diffusion Policy (Post.): spillage", "note"] == "no simulated episodes"
+
+
+def test_flag_missing_outside_an_errored_episode_is_rejected():
+    frame = fixed_records()
+    frame["spillage"] = frame["spillage"].astype(object)
+    frame.loc[3, "spillage"] = None
+    with pytest.raises(InputError, match="`spillage` is missing in 1"):
+        normalize_records(frame)
+
+
+def test_shards_and_consolidated_file_are_counted_once(built):
+    run, frame, _ = built
+    loaded = load_run(run, exclude=run / "report")
+    assert len(loaded.episodes) == len(frame)
+    assert loaded.duplicates_dropped == len(frame)
+
+
+def test_report_writes_every_format_and_a_self_contained_html(built):
+    run, _, result = built
+    out = result.out_dir
+    assert out == run / "report"
+    for name in ("report.md", "report.html", "report.tex", "provenance.json", "csv/fig5_overall.csv",
+                 "csv/fig6_per_food.csv", "csv/fig8_ablation.csv", "csv/breakdown_long.csv",
+                 "figures/fig5_overall.png", "figures/fig6_per_food.png", "figures/fig8_ablation.png"):
+        assert (out / name).is_file(), name
+    page = (out / "report.html").read_text()
+    sources = re.findall(r'\bsrc="([^"]*)"', page)
+    assert len(sources) == len(list((out / "figures").glob("*.png")))
+    for src in sources:
+        assert src.startswith("data:image/png;base64,")
+        assert base64.b64decode(src.split(",", 1)[1])[:8] == b"\x89PNG\r\n\x1a\n"
+    assert all(h.startswith("#") for h in re.findall(r'\bhref="([^"]*)"', page))
+    assert "<link" not in page and "<script" not in page and "url(" not in page
+    for text in ("real robot (paper)", "simulation", "feedbeef", "root_seed: 0", "report code git commit",
+                 "same episode seeds for every method", "FD fudge"):
+        assert text in page, text
+
+
+def test_latex_uses_booktabs_and_escapes(built):
+    tex = (built[2].out_dir / "latex" / "fig5_overall.tex").read_text()
+    assert "\\toprule" in tex and "\\midrule" in tex and "\\bottomrule" in tex
+    assert "\\%" in tex and "82.0\\%" in tex
+
+
+def test_sweep_pareto_front_and_best_parameters():
+    trials = pd.DataFrame({
+        "number": [0, 1, 2, 3, 4],
+        "state": ["COMPLETE", "COMPLETE", "COMPLETE", "FAIL", "COMPLETE"],
+        "rho": [2.5, 1.0, 4.0, 8.0, 0.5],
+        "s": [30, 30, 60, 90, 12],
+        "success_rate": [0.8, 0.7, 0.9, math.nan, 0.6],
+        "spillage_rate": [0.05, 0.02, 0.10, math.nan, 0.05],
+    })
+    summary = summarize_sweep(trials, None)
+    assert summary.objectives == {"success_rate": "maximize", "spillage_rate": "minimize"}
+    assert sorted(summary.trials.loc[summary.trials["pareto"], "number"]) == [0, 1, 2]  # 4 is dominated by 0
+
+
+def test_cli_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
+    assert main(["report", str(tmp_path / "nope")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "run directory not found" in err
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "empty" / "other.parquet").write_bytes(pd.DataFrame({"x": [1]}).to_parquet())
+    assert main(["report", str(tmp_path / "empty")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "no episode records" in err and "other.parquet" in err
