@@ -25,6 +25,7 @@ COMMAND_MODULES = [
 TRAIN_MODULES = [
     "grits_lab.spillage.commands",
     "grits_lab.policies.commands",
+    "grits_lab.policies.bc.commands",
 ]
 
 
