@@ -41,7 +41,18 @@ def open_storage(spec: str | None, default_journal: Path) -> tuple[BaseStorage, 
         )
     if scheme == "postgres":  # SQLAlchemy dropped this alias
         spec, scheme = "postgresql" + spec[len("postgres"):], "postgresql"
-    return _open_rdb(spec, scheme), redact(spec)
+    return _open_rdb(_with_available_driver(spec), scheme, redact(spec)), redact(spec)
+
+
+def _with_available_driver(url: str) -> str:
+    """postgresql:// means psycopg 3 to SQLAlchemy 2.1; use psycopg2 when only that is installed."""
+    if not url.startswith("postgresql://"):
+        return url
+    import importlib.util
+
+    if importlib.util.find_spec("psycopg") is None and importlib.util.find_spec("psycopg2") is not None:
+        return "postgresql+psycopg2://" + url[len("postgresql://"):]
+    return url
 
 
 def _open_journal(path: Path) -> JournalStorage:
@@ -56,7 +67,7 @@ def _open_journal(path: Path) -> JournalStorage:
         raise StorageError(f"journal storage {path} is not a readable Optuna journal: {exc}") from None
 
 
-def _open_rdb(url: str, scheme: str) -> RDBStorage:
+def _open_rdb(url: str, scheme: str, shown: str) -> RDBStorage:
     import sqlalchemy.exc
 
     engine_kwargs: dict = {"pool_pre_ping": True}
@@ -67,19 +78,19 @@ def _open_rdb(url: str, scheme: str) -> RDBStorage:
     for attempt in range(5):
         try:
             return RDBStorage(url, engine_kwargs=engine_kwargs)
-        except ModuleNotFoundError as exc:
-            driver = _DRIVER_HINT.get(scheme, "its driver")
-            raise StorageError(f"storage {redact(url)} needs the database driver {exc.name} (pip install {driver})") from None
+        except ImportError:  # Optuna re-raises the driver's ModuleNotFoundError as ImportError
+            driver = _DRIVER_HINT.get(scheme, "its database driver")
+            raise StorageError(f"storage {shown} needs a database driver (pip install {driver})") from None
         except sqlalchemy.exc.OperationalError as exc:
-            raise StorageError(f"cannot reach storage {redact(url)}: {_first_line(exc.orig or exc)}") from None
+            raise StorageError(f"cannot reach storage {shown}: {_first_line(exc.orig or exc)}") from None
         except (sqlalchemy.exc.IntegrityError, sqlalchemy.exc.ProgrammingError) as exc:
             if attempt == 4:
-                raise StorageError(f"cannot initialize storage {redact(url)}: {_first_line(exc.orig or exc)}") from None
+                raise StorageError(f"cannot initialize storage {shown}: {_first_line(exc.orig or exc)}") from None
             time.sleep(0.2 * (attempt + 1))
         except sqlalchemy.exc.ArgumentError as exc:
-            raise StorageError(f"invalid storage URL {redact(url)}: {_first_line(exc)}") from None
+            raise StorageError(f"invalid storage URL {shown}: {_first_line(exc)}") from None
         except sqlalchemy.exc.SQLAlchemyError as exc:
-            raise StorageError(f"cannot open storage {redact(url)}: {_first_line(exc)}") from None
+            raise StorageError(f"cannot open storage {shown}: {_first_line(exc)}") from None
     raise AssertionError("unreachable")
 
 

@@ -1,0 +1,172 @@
+"""The study loop in one process: defaults first, seeded reproducibility, resumption, crashes, stale trials."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import subprocess
+import time
+
+import pandas as pd
+import pytest
+import yaml
+from optuna.trial import TrialState
+
+from grits_lab.errors import InputError
+from grits_lab.tune.config import load_study_config
+from grits_lab.tune.objective import check_records, make_evaluator
+from grits_lab.tune.outputs import write_outputs
+from grits_lab.tune.storage import open_storage
+from grits_lab.tune.study import (
+    HEARTBEAT_ATTR, REQUEUED_ATTR, RETRY_OF_ATTR, WORKER_ATTR, WorkerIdentity, open_study,
+    recover_stale_trials, run_trials, stale_reason,
+)
+from grits_lab.tune.synthetic import episode_probabilities
+
+
+def run_study(config, journal, n_trials=None):
+    storage, _ = open_storage(str(journal), journal)
+    study = open_study(config, storage)
+    run_trials(config, study, storage, make_evaluator(config), n_trials=n_trials, progress=False)
+    return study, storage
+
+
+def history(study):
+    return [(t.number, t.state.name, t.params.get("rho"), t.params.get("s"), t.values)
+            for t in study.get_trials(deepcopy=False)]
+
+
+def test_paper_defaults_run_first_and_budget_is_respected(sweep_file, tmp_path):
+    config = load_study_config(sweep_file(n_trials=4))
+    study, _ = run_study(config, tmp_path / "j.log")
+    trials = study.get_trials(deepcopy=False)
+    assert [t.state for t in trials] == [TrialState.COMPLETE] * 4
+    assert (trials[0].params["rho"], trials[0].params["s"]) == (2.5, 30)
+    assert trials[0].user_attrs["enqueued"] is True
+    assert all(t.user_attrs["n_episodes"] == 8 for t in trials)
+    # Opening the study again queues the defaults no second time.
+    study, _ = run_study(config, tmp_path / "j.log")
+    assert sum((t.params["rho"], t.params["s"]) == (2.5, 30) for t in study.get_trials()) == 1
+
+
+def test_same_seed_same_study_and_other_seed_other_study(sweep_file, tmp_path):
+    config = load_study_config(sweep_file(n_trials=6))
+    a, _ = run_study(config, tmp_path / "a.log")
+    b, _ = run_study(config, tmp_path / "b.log")
+    assert history(a) == history(b)
+    other = dataclasses.replace(config, sampler=dataclasses.replace(config.sampler, seed=4))
+    c, _ = run_study(other, tmp_path / "c.log")
+    assert history(c)[0] == history(a)[0]  # the enqueued defaults
+    assert history(c)[1:] != history(a)[1:]
+
+
+def test_stopped_and_resumed_study_equals_an_uninterrupted_one(sweep_file, tmp_path):
+    config = load_study_config(sweep_file(n_trials=7))
+    resumed, _ = run_study(config, tmp_path / "r.log", n_trials=3)
+    before = history(resumed)
+    resumed, _ = run_study(config, tmp_path / "r.log")
+    straight, _ = run_study(config, tmp_path / "s.log")
+    assert history(resumed)[:3] == before
+    assert history(resumed) == history(straight)
+
+
+def test_crashing_trials_are_kept_as_failed_and_the_study_goes_on(sweep_file, tmp_path):
+    config = load_study_config(sweep_file(n_trials=8, synthetic={"crash_above_rho": 2.0}))
+    study, _ = run_study(config, tmp_path / "j.log")
+    trials = study.get_trials(deepcopy=False)
+    failed = [t for t in trials if t.state == TrialState.FAIL]
+    assert failed, "with rho in [0.5, 8] and a crash above 2, some trial must crash"
+    assert all("configured crash" in t.user_attrs["error"] and t.params["rho"] > 2.0 for t in failed)
+    assert all(t.params["rho"] <= 2.0 for t in trials if t.state == TrialState.COMPLETE)
+    assert len(trials) == 8  # failed trials count against the budget: a crashing region cannot loop forever
+
+
+def _dead_pid() -> int:
+    proc = subprocess.Popen(["true"])
+    proc.wait()
+    return proc.pid
+
+
+def test_stale_running_trial_is_failed_and_its_parameters_rerun(sweep_file, tmp_path):
+    config = load_study_config(sweep_file(n_trials=3))
+    journal = tmp_path / "j.log"
+    storage, _ = open_storage(str(journal), journal)
+    study = open_study(config, storage)
+    # A worker that died mid-trial: it took the enqueued defaults and never reported back.
+    orphan = study.ask()
+    orphan.suggest_float("rho", 0.5, 8.0, log=True)
+    orphan.suggest_int("s", 0, 90, step=6)
+    dead = WorkerIdentity(WorkerIdentity.current().host, _dead_pid(), "deadbeef")
+    orphan.set_user_attr(WORKER_ATTR, dead.encode())
+    orphan.set_user_attr(HEARTBEAT_ATTR, time.time())
+    run_trials(config, study, storage, make_evaluator(config), progress=False)
+    trials = study.get_trials(deepcopy=False)
+    assert trials[0].state == TrialState.FAIL and trials[0].user_attrs[REQUEUED_ATTR] is True
+    assert "gone" in trials[0].user_attrs["error"]
+    retry = [t for t in trials if t.user_attrs.get(RETRY_OF_ATTR) == 0]
+    assert len(retry) == 1 and retry[0].state == TrialState.COMPLETE
+    assert (retry[0].params["rho"], retry[0].params["s"]) == (2.5, 30)
+    assert sum(t.state == TrialState.COMPLETE for t in trials) == 3  # the stale trial did not use budget
+    # A second recovery pass finds nothing more to do.
+    assert recover_stale_trials(study, storage, config.stale_after_s, WorkerIdentity.current(), log=lambda s: None) == []
+
+
+def test_heartbeat_decides_for_workers_on_other_hosts(sweep_file, tmp_path):
+    config = load_study_config(sweep_file())
+    storage, _ = open_storage(str(tmp_path / "j.log"), tmp_path / "j.log")
+    study = open_study(config, storage)
+    trial = study.ask()
+    trial.set_user_attr(WORKER_ATTR, WorkerIdentity("elsewhere", os.getpid(), "abcd").encode())
+    now = time.time()
+    trial.set_user_attr(HEARTBEAT_ATTR, now - 10)
+    frozen = study.get_trials(deepcopy=False)[0]
+    me = WorkerIdentity.current()
+    assert stale_reason(frozen, me, stale_after_s=60, now=now) is None
+    assert "no heartbeat" in stale_reason(frozen, me, stale_after_s=60, now=now + 100)
+
+
+def test_outputs_best_yaml_is_a_guidance_override(sweep_file, tmp_path):
+    config = load_study_config(sweep_file(n_trials=5, objective={"mode": "multi"}))
+    study, _ = run_study(config, tmp_path / "j.log")
+    summary = write_outputs(study, config, tmp_path / "out", "j.log", "synthetic")
+    best = yaml.safe_load((tmp_path / "out" / "best.yaml").read_text())
+    assert set(best) == {"guidance"} and set(best["guidance"]) == {"rho", "s"}
+    assert isinstance(best["guidance"]["s"], int)
+    table = pd.read_parquet(tmp_path / "out" / "trials.parquet")
+    assert list(table["number"]) == list(range(5))
+    assert pd.read_csv(tmp_path / "out" / "trials.csv")["success_rate"].tolist() == pytest.approx(table["success_rate"].tolist())
+    assert (tmp_path / "out" / "pareto.png").stat().st_size > 0
+    assert (tmp_path / "out" / "importance.png").stat().st_size > 0
+    assert summary["defaults"]["trial"] == 0 and summary["best"]["n_episodes"] == 8
+
+
+def test_importance_with_one_trial_is_skipped_with_a_note(sweep_file, tmp_path):
+    config = load_study_config(sweep_file(n_trials=1))
+    study, _ = run_study(config, tmp_path / "j.log")
+    summary = write_outputs(study, config, tmp_path / "out", "j.log", "synthetic")
+    assert not (tmp_path / "out" / "importance.png").exists()
+    assert any("at least 2 completed trials" in note for note in summary["notes"])
+    assert (tmp_path / "out" / "best.yaml").exists()
+
+
+def test_records_must_cover_exactly_the_validation_episodes(sweep_file):
+    config = load_study_config(sweep_file())
+    evaluator = make_evaluator(config)
+    records = evaluator(2.5, 30, run_id="x")
+    check_records(records, config.validation.episodes())
+    with pytest.raises(InputError, match="differ from the validation set"):
+        check_records(records.iloc[1:], config.validation.episodes())
+    shifted = records.assign(seed=records["seed"] + 1)
+    with pytest.raises(InputError, match="differ from the validation set"):
+        check_records(shifted, config.validation.episodes())
+
+
+def test_synthetic_stand_in_is_deterministic_and_guidance_trades_spillage_for_failures(sweep_file):
+    config = load_study_config(sweep_file())
+    evaluator = make_evaluator(config)
+    pd.testing.assert_frame_equal(evaluator(1.0, 30, "a").drop(columns="wall_time_s"),
+                                  evaluator(1.0, 30, "a").drop(columns="wall_time_s"))
+    spill = [episode_probabilities(rho, 30, "soybeans", "high", 100)[0] for rho in (0.0, 1.0, 2.5, 8.0)]
+    fail = [episode_probabilities(rho, 30, "soybeans", "high", 100)[1] for rho in (0.0, 1.0, 2.5, 8.0)]
+    assert spill == sorted(spill, reverse=True) and fail == sorted(fail)
+    assert (evaluator(1.0, 30, "a")["method"] == "synthetic").all()

@@ -1,0 +1,85 @@
+"""`grits-lab sweep` from the command line: clear one-line failures and a full run on the stand-in."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+import yaml
+from sweep_helpers import free_port
+
+from grits_lab.cli import main
+from grits_lab.errors import StorageError
+from grits_lab.tune import grits_binding
+from grits_lab.tune.storage import open_storage
+
+
+def one_error_line(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("grits-lab: error: "), err
+    return err[0]
+
+
+def test_unreachable_postgres_url_is_rejected_quickly_without_the_password(sweep_file, capsys):
+    url = f"postgresql://grits:hunter2@127.0.0.1:{free_port()}/sweeps"
+    start = time.monotonic()
+    assert main(["sweep", str(sweep_file()), "--storage", url, "--no-progress"]) == 2
+    line = one_error_line(capsys)
+    assert "cannot reach storage postgresql://grits:***@127.0.0.1" in line and "hunter2" not in line
+    assert time.monotonic() - start < 20
+
+
+@pytest.mark.parametrize("spec, message", [
+    ("redis://localhost:6379/0", "unsupported storage URL"),
+    ("sqlite:////nonexistent-dir/deeper/x.db", "cannot reach storage"),
+])
+def test_bad_storage_specs_are_rejected(tmp_path, spec, message):
+    with pytest.raises(StorageError, match=message):
+        open_storage(spec, tmp_path / "j.log")
+
+
+def test_journal_path_that_is_a_directory_is_rejected(tmp_path):
+    with pytest.raises(StorageError, match="is a directory"):
+        open_storage(str(tmp_path), tmp_path / "j.log")
+
+
+def test_grits_evaluator_needs_its_config_and_checkpoints(sweep_file, tmp_path, capsys):
+    missing_config = sweep_file(evaluator="grits", evaluation={"config": str(tmp_path / "none.yaml")})
+    assert main(["sweep", str(missing_config)]) == 2
+    assert "evaluation config not found" in one_error_line(capsys)
+    (tmp_path / "eval.yaml").write_text("{}\n")
+    missing_ckpt = sweep_file(evaluator="grits", evaluation={"config": str(tmp_path / "eval.yaml"),
+                                                             "checkpoints": [str(tmp_path / "policy.pt")]})
+    assert main(["sweep", str(missing_ckpt)]) == 2
+    assert "checkpoint not found" in one_error_line(capsys)
+    assert not (tmp_path / "results").exists()  # failed before any storage was created
+
+
+def test_missing_evaluation_layer_is_one_clear_line(sweep_file, tmp_path, capsys, monkeypatch):
+    (tmp_path / "eval.yaml").write_text("{}\n")
+    monkeypatch.setattr(grits_binding, "EVALUATION_MODULE", "grits_lab.evaluation_not_installed")
+    config = sweep_file(evaluator="grits", evaluation={"config": str(tmp_path / "eval.yaml")})
+    assert main(["sweep", str(config)]) == 2
+    line = one_error_line(capsys)
+    assert "needs the evaluation layer" in line and "evaluator: synthetic" in line
+
+
+def test_full_run_then_report_only(sweep_file, tmp_path, capsys):
+    config = sweep_file(n_trials=3)
+    assert main(["sweep", str(config), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "defaults  trial 0: rho=2.5 s=30" in out and "optuna-dashboard" in out
+    folder = tmp_path / "results" / "study"
+    for name in ("trials.csv", "trials.parquet", "best.yaml", "summary.json", "pareto.png", "importance.png", "journal.log"):
+        assert (folder / name).exists(), name
+    assert len(list((folder / "records").glob("trial_*.parquet"))) == 3
+    (folder / "best.yaml").unlink()
+    assert main(["sweep", str(config), "--report-only", "--no-plots"]) == 0
+    assert set(yaml.safe_load((folder / "best.yaml").read_text())) == {"guidance"}
+
+
+def test_changed_search_space_on_an_existing_study_is_rejected(sweep_file, capsys):
+    assert main(["sweep", str(sweep_file(n_trials=1)), "--no-progress", "--no-plots"]) == 0
+    capsys.readouterr()
+    assert main(["sweep", str(sweep_file(n_trials=1, rho={"high": 9.0})), "--no-progress"]) == 2
+    assert "different search space" in one_error_line(capsys)
