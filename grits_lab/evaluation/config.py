@@ -1,0 +1,184 @@
+"""Typed configuration of an evaluation run: methods, checkpoints, guidance, foods x levels x trials, task stages.
+
+An evaluation config is one YAML file (experiments/evaluate*.yaml). Everything that changes an
+episode's outcome is in it (and so in the run directory's config.yaml); the executor section
+only decides where episodes run. The sweep layer overrides `guidance` with `{rho, s}`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from grits_lab.config import config_from_dict, load_yaml, require
+from grits_lab.errors import ConfigError
+from grits_lab.perception.composite import CloudConfig
+from grits_lab.runners.config import ExecutorConfig
+
+# The paper's ten unseen test foods (SPEC "Foods"), as named in grits_lab/sim/foods.yaml.
+UNSEEN_FOODS = [
+    "sago", "red_bean", "mentos", "marshmallow", "fudge", "penne", "prune", "ramen_snack", "nuts", "milk_tea",
+]
+
+
+@dataclass
+class GuidanceSettings:
+    """GRITS guidance (Algorithm 1). Paper: rho = 2.5, s = 30 on the 100-step scale, detached x0 gradient."""
+
+    rho: float = 2.5
+    s: int = 30
+    gradient: Literal["x0", "xt"] = "x0"
+    grad_clip: float | None = None  # per-axis clamp of the gradient (the authors' code clips)
+    clip_estimate: bool = False
+
+    def __post_init__(self) -> None:
+        require(self.rho >= 0, "guidance.rho", self.rho, "non-negative")
+        require(self.s >= -1, "guidance.s", self.s, "at least -1 (-1 guides no step)")
+        require(self.grad_clip is None or self.grad_clip > 0, "guidance.grad_clip", self.grad_clip, "positive or null")
+
+
+@dataclass
+class PostHocSettings:
+    """Diffusion Policy (Post.): gradient steps on the finished trajectory (authors' code: 6)."""
+
+    rho: float = 2.5
+    n_steps: int = 6
+    grad_clip: float | None = None
+
+    def __post_init__(self) -> None:
+        require(self.rho >= 0, "posthoc.rho", self.rho, "non-negative")
+        require(self.n_steps >= 0, "posthoc.n_steps", self.n_steps, "non-negative")
+
+
+@dataclass
+class CheckpointPaths:
+    """Trained models the methods load; a method whose checkpoint is null cannot be evaluated."""
+
+    policy: str | None = None  # diffusion policy (dp, dp_post, grits*)
+    predictor: str | None = None  # spillage predictor, composite cloud + DP3 (grits, dp_post)
+    predictor_raw: str | None = None  # trained on raw camera clouds (grits_raw)
+    predictor_pointnet2: str | None = None  # PointNet++ encoder (grits_pointnet2)
+    bc: str | None = None  # behavior cloning (bc)
+    demos: str | None = None  # demonstration dataset: SCONE's scoop prior (mean demonstration)
+
+
+@dataclass
+class ScoopSettings:
+    """The learned scoop: receding-horizon execution and when the scoop counts as complete."""
+
+    max_steps: int = 80  # actions (10 Hz) before the scoop is cut off
+    # A planned chunk that moves the spoon less than this (metres, every waypoint) ends the scoop:
+    # the policy holds its final pose, as demonstrations do after they finish.
+    still_tolerance: float = 0.004
+    min_steps: int = 24  # never stop before this many actions (the spoon starts still)
+    n_action_steps: int | None = None  # null: the policy's own (12 at the paper's settings)
+    settle_steps: int = 5  # actions holding the last pose before the scoop is judged
+
+    def __post_init__(self) -> None:
+        require(self.max_steps >= 1, "scoop.max_steps", self.max_steps, "at least 1")
+        require(self.still_tolerance > 0, "scoop.still_tolerance", self.still_tolerance, "positive")
+        require(self.min_steps >= 0, "scoop.min_steps", self.min_steps, "non-negative")
+        require(self.n_action_steps is None or self.n_action_steps >= 1, "scoop.n_action_steps", self.n_action_steps, "at least 1 or null")
+        require(self.settle_steps >= 0, "scoop.settle_steps", self.settle_steps, "non-negative")
+
+
+@dataclass
+class TransferSettings:
+    """Stages 2 and 3: locate the target bowl from the cameras, move there without collision, pour."""
+
+    enabled: bool = True
+    clearance: float = 0.06  # metres the spoon keeps above the bowls' rims and the table on the way
+    max_speed: float = 0.12  # m/s of the spoon while transferring (commands at the control rate)
+    pour_height: float = 0.05  # spoon centre above the target bowl's rim when pouring
+    pour_angle_deg: float = 120.0  # roll of the spoon about its x axis to empty it
+    pour_steps: int = 20
+    settle_steps: int = 15  # actions holding still after the pour before counting
+
+    def __post_init__(self) -> None:
+        require(self.clearance > 0, "transfer.clearance", self.clearance, "positive")
+        require(self.max_speed > 0, "transfer.max_speed", self.max_speed, "positive")
+        require(self.pour_steps >= 1, "transfer.pour_steps", self.pour_steps, "at least 1")
+
+
+@dataclass
+class RuleBasedSettings:
+    """The rule-based baseline (SPEC): centre, measure the food height, rotate, dig 5 cm, fixed scoop."""
+
+    dig_depth: float = 0.05
+    entry_pitch_deg: float = 35.0  # spoon tip down while digging
+    drag: float = 0.06  # metres of the scooping stroke along the spoon's x
+    lift_height: float = 0.20
+    steps_per_segment: int = 8
+
+
+@dataclass
+class SconeSettings:
+    """SCONE-style active perception: a vertical probe measures surface height and resistance."""
+
+    probe_depth: float = 0.03  # metres the spoon's tip is pushed below the first contact
+    probe_step: float = 0.004  # metres per action while probing
+    contact_force: float = 0.05  # newtons on the spoon that count as touching the food
+    reference_resistance: float = 2.0  # N per cm; the scoop's depth is scaled by ref / measured
+    min_depth_scale: float = 0.5
+    max_depth_scale: float = 1.3
+
+
+@dataclass
+class EvaluationConfig:
+    """One evaluation run: methods x foods x levels x trials, with the same seeds for every method."""
+
+    run_id: str = "evaluate"
+    output_dir: str = "results/evaluate"
+    seed: int = 0  # root seed: episode seed = derive_seed(seed, food, level, trial)
+    methods: list[str] = field(default_factory=lambda: ["grits", "dp"])
+    foods: list[str] = field(default_factory=lambda: list(UNSEEN_FOODS))
+    levels: list[str] = field(default_factory=list)  # empty: every level each food defines
+    trials: int = 5
+    checkpoints: CheckpointPaths = field(default_factory=CheckpointPaths)
+    guidance: GuidanceSettings = field(default_factory=GuidanceSettings)
+    posthoc: PostHocSettings = field(default_factory=PostHocSettings)
+    scoop: ScoopSettings = field(default_factory=ScoopSettings)
+    transfer: TransferSettings = field(default_factory=TransferSettings)
+    rule_based: RuleBasedSettings = field(default_factory=RuleBasedSettings)
+    scone: SconeSettings = field(default_factory=SconeSettings)
+    sim: dict[str, Any] = field(default_factory=dict)  # grits_lab.sim.SimConfig keys
+    cloud: CloudConfig = field(default_factory=CloudConfig)
+    num_threads: int = 1  # torch threads per worker
+    flush_every: int = 4  # write the records file after this many finished episodes
+    executor: ExecutorConfig = field(default_factory=ExecutorConfig)
+
+    def __post_init__(self) -> None:
+        from grits_lab.evaluation.methods import METHODS
+
+        require(bool(self.run_id.strip()), "run_id", self.run_id, "a non-empty name")
+        require(len(self.methods) >= 1, "methods", self.methods, "a non-empty list")
+        for m in self.methods:
+            require(m in METHODS, "methods", m, f"one of {', '.join(METHODS)}")
+        require(len(set(self.methods)) == len(self.methods), "methods", self.methods, "without repeats")
+        require(len(self.foods) >= 1, "foods", self.foods, "a non-empty list")
+        require(self.trials >= 1, "trials", self.trials, "at least 1")
+        require(self.num_threads >= 1, "num_threads", self.num_threads, "at least 1")
+        require(self.flush_every >= 1, "flush_every", self.flush_every, "at least 1")
+
+
+def load_evaluation_config(path: str | Path, overrides: dict[str, Any] | None = None) -> EvaluationConfig:
+    """Load an evaluation YAML, with `overrides` (e.g. {"guidance": {"rho": 1.0, "s": 24}}) merged in."""
+    data = load_yaml(path)
+    if overrides:
+        data = merge(data, overrides)
+    try:
+        return config_from_dict(EvaluationConfig, data)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+
+
+def merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    """Recursive dict merge: mappings merge key by key, anything else is replaced."""
+    out = dict(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = merge(out[key], value)
+        else:
+            out[key] = value
+    return out

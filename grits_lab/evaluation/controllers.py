@@ -1,0 +1,158 @@
+"""Scoop controllers: what the episode loop asks for the next chunk of actions, and the learned methods' adapters.
+
+The protocol (duck-typed, so the baselines in grits_lab/policies need not import this module):
+
+    controller.cloud_steps: int          newest steps whose composite cloud the controller reads
+    controller.reset(scene) -> None      once per episode, before the first plan
+    controller.plan(history, scene) -> Chunk | None
+                                         the next actions (k, 9) world frame; None ends the scoop
+
+`scene` (grits_lab/evaluation/scene.py) gives read access to the cameras and the spoon's
+sensors; `history` holds the measured spoon poses and clouds so far. The episode loop executes
+`n_action_steps` of each chunk and plans again (receding horizon), so a controller never steps
+the simulator itself.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+
+from grits_lab.seeding import derive_seed
+
+
+@dataclass
+class Chunk:
+    actions: np.ndarray  # (k, 9) world-frame spoon poses
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+    plan_time_s: float = 0.0
+
+
+class ObsHistory:
+    """Measured spoon poses (every step) and clouds (where rendered) of the current episode."""
+
+    def __init__(self) -> None:
+        self.ee_pose: list[np.ndarray] = []
+        self.clouds: dict[int, np.ndarray] = {}
+        self.rgbd: dict[int, np.ndarray] = {}
+
+    def __len__(self) -> int:
+        return len(self.ee_pose)
+
+    def append(self, obs: dict[str, Any]) -> None:
+        self.ee_pose.append(np.asarray(obs["ee_pose"], dtype=np.float32))
+
+    def poses(self, n: int) -> np.ndarray:
+        """(n, 9) newest poses; before the first step the first pose repeats (robot at rest), as in training."""
+        idx = np.clip(np.arange(len(self) - n, len(self)), 0, len(self) - 1)
+        return np.stack([self.ee_pose[i] for i in idx])
+
+    def stacked(self, store: dict[int, np.ndarray], n: int) -> np.ndarray:
+        """(n, ...) newest entries of a sparse per-step store; a missing step takes the nearest earlier one
+        (or the earliest stored), which only fills history slots the policy does not read."""
+        steps = sorted(store)
+        out = []
+        for i in np.clip(np.arange(len(self) - n, len(self)), 0, len(self) - 1):
+            earlier = [s for s in steps if s <= i]
+            out.append(store[earlier[-1] if earlier else steps[0]])
+        return np.stack(out)
+
+
+def _still(actions: np.ndarray, pose: np.ndarray, tolerance: float) -> bool:
+    return bool(np.all(np.linalg.norm(actions[:, :3] - pose[None, :3], axis=1) < tolerance))
+
+
+class DiffusionController:
+    """dp, dp_post and the GRITS variants: one trained policy, a sampler, optionally a predictor.
+
+    Each plan draws its initial noise from a generator seeded by (episode seed, plan index), so
+    dp and grits with rho = 0 see the very same noise and produce the very same episode.
+    """
+
+    def __init__(self, policy: Any, predictor: Any, sampler_kind: str, guidance: Any, posthoc: Any, raw_cloud: bool = False) -> None:
+        from grits_lab.sampling import DDIMSampler, GuidanceConfig, PostHocConfig, PostHocSampler
+
+        self.policy = policy
+        self.predictor = predictor
+        self.raw_cloud = raw_cloud
+        cfg = policy.config
+        self.n_obs_steps = cfg.n_obs_steps
+        self.n_action_steps = cfg.n_action_steps
+        kind = cfg.obs_encoder.kind
+        self.obs_kind = kind
+        self.cloud_steps = cfg.obs_encoder.cloud_steps if kind == "pointcloud" else 0
+        self.image_steps = cfg.n_obs_steps if kind == "rgbd" else 0
+        scheduler = policy.noise_scheduler
+        if sampler_kind == "guided":
+            self.sampler = DDIMSampler(scheduler, GuidanceConfig(
+                rho=guidance.rho, threshold=guidance.s, gradient=guidance.gradient,
+                grad_clip=guidance.grad_clip, clip_estimate=guidance.clip_estimate, diagnostics=True,
+            ))
+        elif sampler_kind == "posthoc":
+            self.sampler = PostHocSampler(scheduler, PostHocConfig(rho=posthoc.rho, n_steps=posthoc.n_steps, grad_clip=posthoc.grad_clip))
+        else:
+            self.sampler = policy.sampler
+        self.plans = 0
+        self.seed = 0
+
+    def reset(self, scene: Any) -> None:
+        self.plans = 0
+        self.seed = scene.seed
+
+    def observation(self, history: ObsHistory, scene: Any) -> dict[str, np.ndarray]:
+        obs = {"ee_pose": history.poses(self.n_obs_steps)}
+        if self.obs_kind == "pointcloud":
+            obs["cloud"] = history.stacked(history.clouds, self.n_obs_steps)
+        elif self.obs_kind == "rgbd":
+            obs["rgbd"] = history.stacked(history.rgbd, self.n_obs_steps)
+        return obs
+
+    def plan(self, history: ObsHistory, scene: Any) -> Chunk:
+        from grits_lab.spillage import SpillageObjective
+
+        start = time.perf_counter()
+        obs = self.observation(history, scene)
+        objective = None
+        if self.predictor is not None:
+            cloud = scene.cloud_raw() if self.raw_cloud else scene.cloud()
+            objective = SpillageObjective(self.predictor, cloud, self.policy.action_normalizer, self.n_obs_steps, self.n_action_steps)
+        generator = torch.Generator().manual_seed(derive_seed(self.seed, "plan", self.plans))
+        with torch.inference_mode(False):
+            plan = self.policy.plan(obs, sampler=self.sampler, objective=objective, generator=generator)
+        self.plans += 1
+        diagnostics = plan.result.summary()
+        return Chunk(plan.actions[0], diagnostics, time.perf_counter() - start)
+
+
+class BCController:
+    """Behavior cloning: one deterministic regression of the next chunk per plan."""
+
+    def __init__(self, policy: Any) -> None:
+        self.policy = policy
+        cfg = policy.config
+        self.n_obs_steps = cfg.n_obs_steps
+        self.obs_kind = cfg.obs_encoder.kind
+        self.cloud_steps = cfg.obs_encoder.cloud_steps if self.obs_kind == "pointcloud" else 0
+        self.image_steps = cfg.n_obs_steps if self.obs_kind == "rgbd" else 0
+
+    def reset(self, scene: Any) -> None:
+        pass
+
+    def plan(self, history: ObsHistory, scene: Any) -> Chunk:
+        start = time.perf_counter()
+        obs = {"ee_pose": history.poses(self.n_obs_steps)}
+        if self.obs_kind == "pointcloud":
+            obs["cloud"] = history.stacked(history.clouds, self.n_obs_steps)
+        elif self.obs_kind == "rgbd":
+            obs["rgbd"] = history.stacked(history.rgbd, self.n_obs_steps)
+        actions = self.policy.predict_action(obs)
+        return Chunk(actions, {}, time.perf_counter() - start)
+
+
+def is_still(chunk: Chunk, pose: np.ndarray, tolerance: float) -> bool:
+    """True when every action of the chunk keeps the spoon within `tolerance` of `pose`: the policy holds."""
+    return _still(chunk.actions, pose, tolerance)

@@ -1,0 +1,231 @@
+"""One whole-task evaluation episode: the method's scoop (receding horizon), then transfer and pour, measured from particles.
+
+Stages and metrics (SPEC, "Metrics"):
+1. Scoop: the controller plans a chunk from the observation history, `n_action_steps` of it are
+   executed, and it plans again, until it returns None, holds still (after `min_steps`), or
+   `max_steps` actions ran. The spoon then holds for `settle_steps` and the scoop is judged:
+   `scooped` = particles lifted in the spoon above the source rim; `scoop_success` by the food's
+   rule (one item, or a third of the spoon covered); `spillage` = any particle spilled during
+   the stage; `spilled_before_scoop` (Fig. 6) = the first spill came at or before the step the
+   scoop completed (the first step with a successful load lifted, else the end of the stage).
+2. Transfer: the target bowl is located from the cameras (grits_lab/evaluation/transfer.py), a
+   level, collision-free path is executed. 3. Pour: roll the spoon over the target and settle.
+`task_success` = scoop success, food transferred (one item, or at least half of the scooped
+particles for small-particle foods) and nothing spilled in any stage.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from grits_lab.evaluation.controllers import ObsHistory, is_still
+from grits_lab.evaluation.scene import EpisodeScene
+from grits_lab.evaluation.transfer import Obstacle, locate_bowl, plan_transfer, pour_motion
+from grits_lab.sim.env import matrix_to_pose9
+
+
+def run_scoop(env: Any, controller: Any, scene: EpisodeScene, history: ObsHistory, settings: Any) -> dict[str, Any]:
+    """Stage 1; returns the scoop's measurements, guidance diagnostics and timings."""
+    cloud_steps = int(getattr(controller, "cloud_steps", 0))
+    image_steps = int(getattr(controller, "image_steps", 0))
+    n_exec = settings.n_action_steps or getattr(controller, "n_action_steps", None)
+    encoder = getattr(getattr(getattr(controller, "policy", None), "config", None), "obs_encoder", None)
+
+    def observe() -> None:
+        index = len(history) - 1
+        if cloud_steps and index not in history.clouds:
+            history.clouds[index] = scene.cloud()
+        if image_steps and index not in history.rgbd:
+            history.rgbd[index] = scene.rgbd(tuple(encoder.image_size), encoder.cameras)
+
+    controller.reset(scene)
+    steps, plans, completion_step = 0, 0, -1
+    plan_times: list[float] = []
+    diagnostics: list[dict[str, Any]] = []
+    stop_reason = "max_steps"
+    last_action = history.ee_pose[-1]
+    while steps < settings.max_steps:
+        observe()
+        chunk = controller.plan(history, scene)
+        if chunk is None:
+            stop_reason = "controller_done"
+            break
+        plans += 1
+        plan_times.append(chunk.plan_time_s)
+        if chunk.diagnostics:
+            diagnostics.append(chunk.diagnostics)
+        if steps >= settings.min_steps and is_still(chunk, history.ee_pose[-1], settings.still_tolerance):
+            stop_reason = "policy_holds"
+            break
+        actions = chunk.actions[: n_exec or len(chunk.actions)]
+        ended = False
+        for i, action in enumerate(actions):
+            obs, _, terminated, truncated, _ = env.step(action)
+            last_action = action
+            steps += 1
+            scene.advance()
+            history.append(obs)
+            remaining = len(actions) - i - 1
+            if 0 < remaining < max(cloud_steps, image_steps):  # the history slots the next plan reads
+                observe()
+            if completion_step < 0 and env.metrics()["scoop_success"]:
+                completion_step = steps - 1
+            if terminated or truncated or steps >= settings.max_steps:
+                ended = True
+                stop_reason = "env_ended" if (terminated or truncated) else "max_steps"
+                break
+        if ended:
+            break
+    for _ in range(settings.settle_steps):
+        env.step(last_action)
+        scene.advance()
+    metrics = env.metrics()
+    end_step = steps - 1 if completion_step < 0 else completion_step
+    first_spill = int(metrics["first_spill_step"])
+    return {
+        "metrics": metrics,
+        "scoop_steps": steps,
+        "n_plans": plans,
+        "stop_reason": stop_reason,
+        "completion_step": completion_step,
+        "spilled_before_scoop": bool(0 <= first_spill <= max(end_step, 0)),
+        "plan_time_mean_s": float(np.mean(plan_times)) if plan_times else 0.0,
+        "plan_time_max_s": float(np.max(plan_times)) if plan_times else 0.0,
+        "diagnostics": diagnostics,
+    }
+
+
+def summarize_guidance(diagnostics: list[dict[str, Any]]) -> dict[str, float]:
+    """Per-episode means of the sampler's per-plan diagnostics (guided and post-hoc plans)."""
+    guided = [d for d in diagnostics if d.get("guided_steps", 0) > 0]
+    if not guided:
+        return {"guided_steps": 0, "p_spill_before": math.nan, "p_spill_after": math.nan,
+                "guidance_grad_norm": math.nan, "guidance_displacement": math.nan}
+    return {
+        "guided_steps": int(sum(d["guided_steps"] for d in guided)),
+        "p_spill_before": float(np.mean([d["cost_first"] for d in guided])),
+        "p_spill_after": float(np.mean([d["cost_last"] for d in guided])),
+        "guidance_grad_norm": float(np.mean([d["grad_norm_mean"] for d in guided])),
+        "guidance_displacement": float(np.mean([d["displacement_total"] for d in guided])),
+    }
+
+
+def run_transfer(env: Any, scene: EpisodeScene, settings: Any) -> dict[str, Any]:
+    """Stages 2 and 3: locate the target, carry the spoon level, pour, settle; returns the measurements."""
+    target = locate_bowl(scene.object_points("target_bowl"))
+    truth = np.asarray(env.target_bowl_pose(), dtype=np.float64)[:3, 3]
+    world = env.world
+    source = world.source_geometry
+    obstacles = [
+        Obstacle(world.source_bowl_position[:2], source.outer_radius, world.source_bowl_position[2] + source.depth),
+        Obstacle(target.centre[:2], target.rim_radius + 0.01, target.rim_height),
+    ]
+    spoon = world.spoon_geometry
+    reach = math.hypot(spoon.half_length, spoon.half_width)
+    current = matrix_to_pose9(scene.spoon_pose())
+    max_step = settings.max_speed / env.config.control_hz
+    path = plan_transfer(current, target, obstacles, settings.clearance, settings.pour_height, max_step, reach)
+    for action in path:
+        env.step(action)
+        scene.advance()
+    spilled_after_transfer = int(env.metrics()["spilled"])
+    pour = pour_motion(path[-1], settings.pour_angle_deg, settings.pour_steps)
+    for action in pour:
+        env.step(action)
+        scene.advance()
+    for _ in range(settings.settle_steps):
+        env.step(pour[-1])
+        scene.advance()
+    return {
+        "metrics": env.metrics(),
+        "spilled_after_transfer": spilled_after_transfer,
+        "target_locate_error_m": float(np.linalg.norm(target.centre[:2] - truth[:2])),
+        "target_fit_residual_m": target.residual,
+        "transfer_steps": int(len(path) + len(pour) + settings.settle_steps),
+    }
+
+
+def run_episode(env: Any, controller: Any, config: Any, *, seed: int, food: str, level: str, builder: Any) -> dict[str, Any]:
+    """The whole task for one (method, food, level, seed); returns the metric part of the record."""
+    start = time.perf_counter()
+    obs, _ = env.reset(seed=int(seed), options={"food": food, "level": level})
+    scene = EpisodeScene(env, builder, seed)
+    history = ObsHistory()
+    history.append(obs)
+    n_particles = int(env.metrics()["n_particles"])
+    scoop = run_scoop(env, controller, scene, history, config.scoop)
+    m = scoop["metrics"]
+    scoop_time = time.perf_counter() - start
+    record: dict[str, Any] = {
+        "n_particles": n_particles,
+        "spilled": int(m["spilled"]),
+        "scooped": int(m["scooped"]),
+        "scoop_success": bool(m["scoop_success"]),
+        "scoop_failure": not bool(m["scoop_success"]),
+        "spillage": int(m["spilled"]) > 0,
+        "spilled_before_scoop": scoop["spilled_before_scoop"],
+        "spoon_coverage": float(m["spoon_coverage"]),
+        "first_spill_step": int(m["first_spill_step"]),
+        "completion_step": scoop["completion_step"],
+        "scoop_steps": scoop["scoop_steps"],
+        "scoop_stop_reason": scoop["stop_reason"],
+        "ik_failures": int(m["ik_failures"]),
+        "n_plans": scoop["n_plans"],
+        "plan_time_mean_s": scoop["plan_time_mean_s"],
+        "plan_time_max_s": scoop["plan_time_max_s"],
+        "scoop_time_s": scoop_time,
+        **summarize_guidance(scoop["diagnostics"]),
+    }
+    transferred, spilled_total, transfer_time = 0, int(m["spilled"]), 0.0
+    record.update({"target_locate_error_m": math.nan, "target_fit_residual_m": math.nan, "spilled_transfer": 0})
+    if config.transfer.enabled and m["scooped"] > 0:
+        t0 = time.perf_counter()
+        tr = run_transfer(env, scene, config.transfer)
+        transfer_time = time.perf_counter() - t0
+        transferred = int(tr["metrics"]["transferred"])
+        spilled_total = int(tr["metrics"]["spilled"])
+        record.update({"target_locate_error_m": tr["target_locate_error_m"], "target_fit_residual_m": tr["target_fit_residual_m"],
+                       "spilled_transfer": max(0, spilled_total - int(m["spilled"]))})
+    needed = 1 if env.food.success_rule == "items" else max(1, math.ceil(0.5 * int(m["scooped"])))
+    record.update({
+        "transferred": transferred,
+        "spilled_total": spilled_total,
+        "transfer_time_s": transfer_time,
+        "renders": scene.renders,
+        "task_success": bool(m["scoop_success"]) and transferred >= needed and spilled_total == 0,
+    })
+    return record
+
+
+def evaluation_episode(spec: Any, context: Any) -> dict[str, Any]:
+    """Work function (grits_lab/runners): one evaluation episode in a worker; models cached per worker."""
+    import torch
+
+    from grits_lab.config import config_from_dict
+    from grits_lab.evaluation.methods import build_controller, guidance_columns
+    from grits_lab.perception.scene import builder_for_env
+    from grits_lab.sim import SimConfig
+
+    start = time.perf_counter()
+    p = spec.params["evaluation"]
+    config = p.config
+    torch.set_num_threads(config.num_threads)
+    sim_config = config_from_dict(SimConfig, config.sim, "sim")
+    env = context.env(sim_config)
+    from grits_lab.config import config_fingerprint
+
+    builder = context.cached(("cloud-builder", config_fingerprint(config.cloud)), lambda: builder_for_env(config.cloud, env))
+    controller = build_controller(p.method, config, p.paths, context.cached)
+    record = run_episode(env, controller, config, seed=spec.seed, food=spec.food, level=spec.level, builder=builder)
+    rho, s = guidance_columns(p.method, config)
+    record.update({
+        "run_id": p.run_id, "method": p.method, "food": spec.food, "split": p.split, "level": spec.level,
+        "trial": p.trial, "seed": spec.seed, "rho": rho, "s": s, "error": "",
+        "wall_time_s": time.perf_counter() - start,
+        **{f"checkpoint_{k}": d for k, d in p.digests.items()},
+    })
+    return record

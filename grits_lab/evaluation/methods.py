@@ -1,0 +1,115 @@
+"""The method registry: every method of the paper by name, with the checkpoints it needs and how to build its scoop controller.
+
+A method is a recipe, not a model: `build_controller(name, config, cache)` loads the checkpoints
+the method needs (through `cache`, so that a worker loads each file once for all its episodes)
+and returns a scoop controller (grits_lab/evaluation/controllers.py protocol). The diffusion
+methods share one trained policy and differ only in the sampler and the predictor checkpoint,
+so a difference between dp, dp_post and grits on the same seed is the guidance's alone.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from grits_lab.errors import ConfigError, StorageError
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """kind: which controller family; predictor: which predictor checkpoint key (None: no predictor);
+    sampler: "plain", "guided" or "posthoc" for the diffusion family."""
+
+    kind: str
+    checkpoints: tuple[str, ...]
+    predictor: str | None = None
+    sampler: str = "plain"
+    description: str = ""
+
+
+METHODS: dict[str, MethodSpec] = {
+    "rule_based": MethodSpec("rule_based", (), description="centre, measure food height, dig 5 cm, fixed scoop"),
+    "bc": MethodSpec("bc", ("bc",), description="behavior cloning: encoder features -> MLP -> actions"),
+    "scone": MethodSpec("scone", ("demos",), description="SCONE-style: probe, then a scoop conditioned on the probe"),
+    "dp": MethodSpec("diffusion", ("policy",), description="Diffusion Policy, unguided"),
+    "dp_post": MethodSpec("diffusion", ("policy", "predictor"), "predictor", "posthoc", "Diffusion Policy (Post.)"),
+    "grits": MethodSpec("diffusion", ("policy", "predictor"), "predictor", "guided", "GRITS: composite cloud + DP3 predictor"),
+    "grits_raw": MethodSpec("diffusion", ("policy", "predictor_raw"), "predictor_raw", "guided", "GRITS, predictor on raw clouds"),
+    "grits_pointnet2": MethodSpec("diffusion", ("policy", "predictor_pointnet2"), "predictor_pointnet2", "guided", "GRITS, PointNet++ predictor"),
+}
+
+
+def method_checkpoints(name: str, checkpoints: Any) -> dict[str, str]:
+    """{key: path} of the files `name` needs; a missing or unset one is a ConfigError naming it."""
+    spec = METHODS[name]
+    out = {}
+    for key in spec.checkpoints:
+        path = getattr(checkpoints, key)
+        if not path:
+            raise ConfigError(f"method {name!r} needs `checkpoints.{key}`; set it in the evaluation config")
+        if not Path(path).exists():
+            raise StorageError(f"method {name!r}: `checkpoints.{key}` not found: {path} (train it first)")
+        out[key] = str(path)
+    return out
+
+
+def file_digest(path: str | Path) -> str:
+    """First 16 hex digits of the SHA-256 of a file, or of a directory's index (datasets)."""
+    path = Path(path)
+    digest = hashlib.sha256()
+    if path.is_dir():
+        for p in sorted(path.rglob("*")):
+            if p.is_file() and p.suffix in (".parquet", ".yaml", ".npz"):
+                digest.update(f"{p.relative_to(path)}:{p.stat().st_size};".encode())
+    else:
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                digest.update(block)
+    return digest.hexdigest()[:16]
+
+
+def guidance_columns(name: str, config: Any) -> tuple[float, int]:
+    """(rho, s) recorded for a method: NaN / -1 for methods without guidance."""
+    spec = METHODS[name]
+    if spec.sampler == "guided":
+        return float(config.guidance.rho), int(config.guidance.s)
+    if spec.sampler == "posthoc":
+        return float(config.posthoc.rho), -1
+    return math.nan, -1
+
+
+def build_controller(name: str, config: Any, paths: dict[str, str], cache: Callable[[Any, Callable[[], Any]], Any]) -> Any:
+    """The scoop controller of method `name`; `cache(key, factory)` keeps loaded models per worker."""
+    from grits_lab.evaluation import controllers
+
+    spec = METHODS[name]
+    if spec.kind == "rule_based":
+        from grits_lab.policies.rule_based import RuleBasedController
+
+        return RuleBasedController(config.rule_based)
+    if spec.kind == "bc":
+        from grits_lab.policies.bc import BCPolicy
+
+        policy = cache(("bc", paths["bc"]), lambda: BCPolicy.load(paths["bc"]))
+        return controllers.BCController(policy)
+    if spec.kind == "scone":
+        from grits_lab.policies.scone import SconeController, scoop_prior
+
+        prior = cache(("scone-prior", paths["demos"]), lambda: scoop_prior(paths["demos"]))
+        return SconeController(config.scone, prior)
+    from grits_lab.policies.diffusion import DiffusionPolicy
+
+    policy = cache(("dp", paths["policy"]), lambda: DiffusionPolicy.load(paths["policy"]))
+    predictor = None
+    if spec.predictor is not None:
+        from grits_lab.spillage import load_predictor
+
+        key = spec.predictor
+        predictor = cache(("predictor", paths[key]), lambda: load_predictor(paths[key]))
+    return controllers.DiffusionController(
+        policy, predictor, spec.sampler, config.guidance, config.posthoc,
+        raw_cloud=(spec.predictor == "predictor_raw"),
+    )

@@ -1,0 +1,269 @@
+"""`grits-lab evaluate`: methods x foods x levels x trials fanned out over the runners, records to Parquet, resumable.
+
+Run directory (the report layer's contract, docs/report.md): `episodes.parquet` (one row per
+finished episode, rewritten atomically every `flush_every` episodes and at the end),
+`config.yaml` (the resolved config) and `provenance.json` (code version, checkpoint digests,
+episode plan). Running the same config again skips every episode already in `episodes.parquet`,
+identified by (method, food, level, trial, seed, rho, s), and only runs the rest.
+
+Every method sees the same episode seeds, derive_seed(root, food, level, trial), so a difference
+between methods is the method's and not the luck of the draw.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import platform
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable
+
+import pandas as pd
+import yaml
+from tqdm import tqdm
+
+from grits_lab.config import config_fingerprint, config_from_dict, config_to_dict
+from grits_lab.errors import ConfigError, InputError, StorageError
+from grits_lab.evaluation.config import EvaluationConfig, load_evaluation_config
+from grits_lab.evaluation.methods import METHODS, file_digest, guidance_columns, method_checkpoints
+from grits_lab.io import ensure_writable_dir, save_parquet_atomic, write_json_atomic, write_text_atomic
+from grits_lab.records import RECORD_COLUMNS
+from grits_lab.runners import EpisodeResult, EpisodeSpec, make_executor
+from grits_lab.runners.base import Executor
+from grits_lab.seeding import derive_seed
+
+EPISODE_WORK = "grits_lab.evaluation.episode:evaluation_episode"
+RECORDS_FILE = "episodes.parquet"
+IDENTITY = ("method", "food", "level", "trial", "seed", "rho", "s")
+
+
+@dataclass(frozen=True)
+class EpisodeKey:
+    """One (food, level, trial) with its seed; the same for every method."""
+
+    food: str
+    level: str
+    trial: int
+    seed: int
+    split: str = "unseen"
+
+
+@dataclass
+class EpisodeParams:
+    """What a worker needs for one evaluation episode besides the spec's seed, food and level."""
+
+    run_id: str
+    method: str
+    trial: int
+    split: str
+    config: EvaluationConfig
+    paths: dict[str, str]
+    digests: dict[str, str]
+
+
+def episode_keys(config: EvaluationConfig) -> list[EpisodeKey]:
+    """Every (food, level, trial) of the config, with seeds derived from the root seed."""
+    from grits_lab.sim import SimConfig
+    from grits_lab.sim.foods import load_foods
+
+    sim = config_from_dict(SimConfig, config.sim, "sim")
+    library = load_foods(sim.foods_file)
+    keys = []
+    for food in config.foods:
+        spec = library.get(food)
+        levels = config.levels or list(spec.levels)
+        present = [lv for lv in levels if lv in spec.levels]
+        if config.levels and not present:
+            raise ConfigError(f"`levels` {config.levels} names no level of food {food!r} (its levels: {', '.join(spec.levels)})")
+        for level in present:
+            for trial in range(config.trials):
+                keys.append(EpisodeKey(food, level, trial, derive_seed(config.seed, food, level, trial), spec.split))
+    return keys
+
+
+def identity_of(row: dict[str, Any]) -> tuple:
+    rho = row["rho"]
+    rho_text = "nan" if rho is None or (isinstance(rho, float) and math.isnan(rho)) else f"{float(rho):.6g}"
+    return (str(row["method"]), str(row["food"]), str(row["level"]), int(row["trial"]), int(row["seed"]), rho_text, int(row["s"]))
+
+
+def build_specs(config: EvaluationConfig, keys: Iterable[EpisodeKey], methods: list[str] | None = None,
+                paths: dict[str, dict[str, str]] | None = None, digests: dict[str, str] | None = None) -> list[EpisodeSpec]:
+    """Specs for methods x keys, method outermost in the list but interleaved by episode for early comparisons."""
+    methods = methods or list(config.methods)
+    paths = paths if paths is not None else {m: method_checkpoints(m, config.checkpoints) for m in methods}
+    digests = digests if digests is not None else checkpoint_digests(paths)
+    specs = []
+    for key in keys:
+        for method in methods:
+            params = EpisodeParams(config.run_id, method, key.trial, key.split, config, paths[method],
+                                   {k: digests[p] for k, p in paths[method].items()})
+            specs.append(EpisodeSpec(
+                episode_id=f"{method}-{key.food}-{key.level}-{key.trial}", work=EPISODE_WORK, seed=key.seed,
+                food=key.food, level=key.level, params={"evaluation": params},
+            ))
+    return specs
+
+
+def checkpoint_digests(paths: dict[str, dict[str, str]]) -> dict[str, str]:
+    files = sorted({p for by_key in paths.values() for p in by_key.values()})
+    return {p: file_digest(p) for p in files}
+
+
+def failure_record(spec: EpisodeSpec, error: str, wall_time_s: float) -> dict[str, Any]:
+    """The record of an episode that raised or whose worker died: every outcome False, the error kept."""
+    p: EpisodeParams = spec.params["evaluation"]
+    rho, s = guidance_columns(p.method, p.config)
+    return {
+        "run_id": p.run_id, "method": p.method, "food": spec.food, "split": p.split, "level": spec.level,
+        "trial": p.trial, "seed": spec.seed, "task_success": False, "spillage": False, "scoop_failure": False,
+        "scoop_success": False, "spilled_before_scoop": False, "n_particles": -1, "spilled": -1, "scooped": -1,
+        "transferred": -1, "rho": rho, "s": s, "error": error or "unknown error", "wall_time_s": wall_time_s,
+        **{f"checkpoint_{k}": d for k, d in p.digests.items()},
+    }
+
+
+def result_record(result: EpisodeResult) -> dict[str, Any]:
+    assert result.spec is not None
+    if result.ok:
+        return dict(result.payload)
+    return failure_record(result.spec, result.error, result.wall_time_s)
+
+
+def records_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
+    """Rows -> DataFrame with the record columns first, in a stable order (method, food, level, trial)."""
+    frame = pd.DataFrame(rows)
+    if frame.empty:
+        return pd.DataFrame(columns=list(RECORD_COLUMNS))
+    for column in RECORD_COLUMNS:
+        if column not in frame.columns:
+            frame[column] = None
+    extra = sorted(c for c in frame.columns if c not in RECORD_COLUMNS)
+    frame = frame[list(RECORD_COLUMNS) + extra]
+    frame["error"] = frame["error"].fillna("").astype(str)
+    return frame.sort_values(["method", "food", "level", "trial"], kind="stable").reset_index(drop=True)
+
+
+def run_specs(specs: list[EpisodeSpec], executor: Executor, progress: bool = True, done: list[dict[str, Any]] | None = None,
+              on_flush: Any = None, flush_every: int = 4, desc: str = "evaluate") -> list[dict[str, Any]]:
+    """Run specs on `executor`; `on_flush(rows)` is called every `flush_every` results and at the end."""
+    rows = list(done or [])
+    bar = tqdm(total=len(specs), desc=desc, disable=not progress, dynamic_ncols=True)
+    since = 0
+    try:
+        for result in executor.map_unordered(specs):
+            rows.append(result_record(result))
+            since += 1
+            bar.update(1)
+            if not result.ok:
+                bar.write(f"episode {result.episode_id} failed: {result.error}")
+            if on_flush is not None and since >= flush_every:
+                on_flush(rows)
+                since = 0
+    finally:
+        bar.close()
+        if on_flush is not None and since:
+            on_flush(rows)
+    return rows
+
+
+def _load_existing(path: Path) -> list[dict[str, Any]]:
+    if not path.exists():
+        return []
+    try:
+        frame = pd.read_parquet(path)
+    except Exception as exc:  # pyarrow raises many types on a damaged file
+        raise StorageError(f"cannot read {path} to resume: {exc}; move it away to start over") from None
+    return frame.to_dict("records")
+
+
+def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], digests: dict[str, str], n_episodes: int) -> dict[str, Any]:
+    from grits_lab.report.provenance import git_commit, package_versions
+
+    return {
+        "run_id": config.run_id,
+        "started (UTC)": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S"),
+        "code git commit": git_commit(),
+        "config fingerprint": config_fingerprint(config),
+        "methods": {m: {"description": METHODS[m].description, "checkpoints": {k: {"path": p, "sha256_16": digests[p]} for k, p in paths[m].items()},
+                        "rho_s": list(guidance_columns(m, config))} for m in config.methods},
+        "guidance": config_to_dict(config.guidance),
+        "posthoc": config_to_dict(config.posthoc),
+        "root seed": config.seed,
+        "seed rule": "derive_seed(root seed, food, level, trial), the same for every method",
+        "episodes planned": n_episodes,
+        "host": platform.node(),
+        "packages": package_versions(),
+    }
+
+
+def evaluate(config: EvaluationConfig, *, progress: bool = True, fresh: bool = False, executor: Executor | None = None) -> pd.DataFrame:
+    """Run (or resume) the evaluation described by `config`; returns every record of the run directory."""
+    out = ensure_writable_dir(config.output_dir)
+    records_path = out / RECORDS_FILE
+    keys = episode_keys(config)
+    paths = {m: method_checkpoints(m, config.checkpoints) for m in config.methods}
+    digests = checkpoint_digests(paths)
+    specs = build_specs(config, keys, paths=paths, digests=digests)
+    write_text_atomic(out / "config.yaml", yaml.safe_dump(config_to_dict(config), sort_keys=False))
+    write_json_atomic(out / "provenance.json", provenance(config, paths, digests, len(specs)))
+    if fresh and records_path.exists():
+        records_path.unlink()
+    done = _load_existing(records_path)
+    finished = {identity_of(r) for r in done}
+    todo = []
+    for spec in specs:
+        p: EpisodeParams = spec.params["evaluation"]
+        rho, s = guidance_columns(p.method, config)
+        ident = identity_of({"method": p.method, "food": spec.food, "level": spec.level, "trial": p.trial, "seed": spec.seed, "rho": rho, "s": s})
+        if ident not in finished:
+            todo.append(spec)
+    if progress and done:
+        print(f"resuming {config.run_id}: {len(specs) - len(todo)} of {len(specs)} episodes already in {records_path}")
+    flush = lambda rows: save_parquet_atomic(records_path, records_frame(rows))
+    if todo:
+        own = executor is None
+        executor = executor or make_executor(config.executor)
+        try:
+            run_specs(todo, executor, progress, done, flush, config.flush_every, desc=config.run_id)
+        finally:
+            if own:
+                executor.close()
+    return pd.read_parquet(records_path) if records_path.exists() else records_frame([])
+
+
+def evaluate_guidance(config_path: str | Path, episodes: list[dict[str, Any]], guidance: dict[str, Any], method: str = "grits",
+                      run_id: str = "sweep", executor: Executor | None = None, progress: bool = False) -> pd.DataFrame:
+    """The sweep's entry point: `method` with guidance {rho, s} on the given episodes -> their records.
+
+    episodes: dicts with food, level, trial, seed (the sweep derives its own seeds from its own
+    root, so no tuning episode is a test episode). Nothing is written to disk: the sweep stores
+    the returned records itself.
+    """
+    config = load_evaluation_config(config_path, {"guidance": dict(guidance), "run_id": run_id})
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; methods: {', '.join(METHODS)}")
+    from grits_lab.sim import SimConfig
+    from grits_lab.sim.foods import load_foods
+
+    library = load_foods(config_from_dict(SimConfig, config.sim, "sim").foods_file)
+    keys = []
+    for e in episodes:
+        food = library.get(str(e["food"]))
+        if str(e["level"]) not in food.levels:
+            raise InputError(f"food {e['food']!r} has no level {e['level']!r}")
+        keys.append(EpisodeKey(str(e["food"]), str(e["level"]), int(e["trial"]), int(e["seed"]), food.split))
+    specs = build_specs(config, keys, methods=[method])
+    own = executor is None
+    executor = executor or make_executor(config.executor)
+    try:
+        rows = run_specs(specs, executor, progress, desc=f"{run_id} {method}")
+    finally:
+        if own:
+            executor.close()
+    return records_frame(rows)
+
+
+def evaluate_file(path: str | Path, overrides: dict[str, Any] | None = None, **kwargs: Any) -> pd.DataFrame:
+    return evaluate(load_evaluation_config(path, overrides), **kwargs)

@@ -1,0 +1,127 @@
+"""Stages 2 and 3 of the task: locate the target bowl from the cameras, carry the spoon there without collision, pour.
+
+Localization uses perception only (no ground truth): the target bowl's pixels (segmentation) are
+back-projected to world points, the points near the top of the bowl (its rim) are fitted with a
+circle by least squares, and the rim height is the top of the points. The cameras see an arc of
+the rim, which a circle fit handles, unlike a centroid of the visible points (biased towards the
+cameras).
+
+The path keeps the spoon level (no tilt, so the load stays in it) and goes up, across and down:
+lift to a safe height above every obstacle's top (bowl rims, with `clearance`), travel in a
+straight line at that height, descend to the pour height above the target's rim. It is checked
+against the obstacles' bounding cylinders before it is executed. The pour rolls the spoon about
+its own x axis above the target's centre, then the spoon holds still while the food settles.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from grits_lab.errors import InputError
+from grits_lab.geometry import matrix_to_rot6d, rot6d_to_matrix
+
+
+@dataclass
+class BowlEstimate:
+    centre: np.ndarray  # (3,) world: centre of the bowl's bottom (x, y) at table height (z)
+    rim_radius: float
+    rim_height: float  # world z of the rim
+    n_points: int
+    residual: float  # RMS of the circle fit, metres
+
+
+def fit_circle(xy: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Least-squares circle (Kasa fit) through (M, 2) points: (centre (2,), radius, RMS residual)."""
+    a = np.column_stack([2 * xy[:, 0], 2 * xy[:, 1], np.ones(len(xy))])
+    b = (xy ** 2).sum(axis=1)
+    (cx, cy, c), *_ = np.linalg.lstsq(a, b, rcond=None)
+    r = math.sqrt(max(c + cx * cx + cy * cy, 0.0))
+    residual = float(np.sqrt(np.mean((np.linalg.norm(xy - [cx, cy], axis=1) - r) ** 2)))
+    return np.array([cx, cy]), r, residual
+
+
+def locate_bowl(points: np.ndarray, table_height: float = 0.0, rim_band: float = 0.012) -> BowlEstimate:
+    """Estimate a round bowl's centre and rim from its visible points (M, 3), world frame."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(pts) < 20:
+        raise InputError(f"the target bowl is not visible to the cameras ({len(pts)} points)")
+    top = float(np.percentile(pts[:, 2], 99.5))
+    rim = pts[pts[:, 2] > top - rim_band]
+    if len(rim) < 10:
+        rim = pts
+    centre, radius, residual = fit_circle(rim[:, :2])
+    return BowlEstimate(np.array([centre[0], centre[1], table_height]), radius, top, len(pts), residual)
+
+
+def level_rotation(pose9: np.ndarray) -> np.ndarray:
+    """(3, 3) the spoon held level (its z up) with the heading of `pose9` kept."""
+    rot = rot6d_to_matrix(np.asarray(pose9[3:9], dtype=np.float64))
+    heading = rot[:, 0].copy()
+    heading[2] = 0.0
+    if np.linalg.norm(heading) < 1e-6:
+        heading = np.array([1.0, 0.0, 0.0])
+    x = heading / np.linalg.norm(heading)
+    z = np.array([0.0, 0.0, 1.0])
+    return np.stack([x, np.cross(z, x), z], axis=1)
+
+
+def _pose(position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    return np.concatenate([position, matrix_to_rot6d(rotation)]).astype(np.float32)
+
+
+def _line(a: np.ndarray, b: np.ndarray, rotation: np.ndarray, max_step: float) -> list[np.ndarray]:
+    n = max(1, int(math.ceil(np.linalg.norm(b - a) / max_step)))
+    return [_pose(a + (b - a) * (i / n), rotation) for i in range(1, n + 1)]
+
+
+@dataclass
+class Obstacle:
+    """A vertical cylinder the spoon must stay above (bowls), world frame."""
+
+    centre_xy: np.ndarray
+    radius: float
+    top: float
+
+
+def path_is_clear(path: np.ndarray, obstacles: list[Obstacle], spoon_reach: float, start_index: int = 0) -> bool:
+    """True when every waypoint from `start_index` on keeps the spoon (a sphere of `spoon_reach`
+    around its centre) above every obstacle cylinder it passes over."""
+    for pose in path[start_index:]:
+        for ob in obstacles:
+            if np.linalg.norm(pose[:2] - ob.centre_xy) < ob.radius + spoon_reach and pose[2] - spoon_reach < ob.top:
+                return False
+    return True
+
+
+def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], clearance: float,
+                  pour_height: float, max_step: float, spoon_reach: float) -> np.ndarray:
+    """(T, 9) level spoon path: up to a safe height, across, down to `pour_height` above the target's rim."""
+    rotation = level_rotation(current)
+    start = np.asarray(current[:3], dtype=np.float64)
+    safe_z = max([start[2]] + [ob.top + clearance + spoon_reach for ob in obstacles])
+    above_target = np.array([target.centre[0], target.centre[1], safe_z])
+    pour_point = np.array([target.centre[0], target.centre[1], target.rim_height + pour_height])
+    waypoints = []
+    waypoints += _line(start, np.array([start[0], start[1], safe_z]), rotation, max_step)
+    waypoints += _line(waypoints[-1][:3].astype(np.float64), above_target, rotation, max_step)
+    waypoints += _line(above_target, pour_point, rotation, max_step)
+    path = np.stack(waypoints)
+    # The descent ends inside the target's cylinder by design: check only the way there.
+    others = [ob for ob in obstacles if np.linalg.norm(ob.centre_xy - target.centre[:2]) > 1e-3]
+    if not path_is_clear(path, others, spoon_reach):
+        raise InputError("no collision-free transfer path at the configured clearance")
+    return path
+
+
+def pour_motion(pose: np.ndarray, angle_deg: float, steps: int) -> np.ndarray:
+    """(steps, 9) roll the spoon about its own x axis by `angle_deg`, in place."""
+    rot = rot6d_to_matrix(np.asarray(pose[3:9], dtype=np.float64))
+    out = []
+    for i in range(1, steps + 1):
+        a = math.radians(angle_deg) * i / steps
+        roll = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
+        out.append(_pose(np.asarray(pose[:3], dtype=np.float64), rot @ roll))
+    return np.stack(out)
