@@ -1,0 +1,305 @@
+"""`ScoopEnv`: the scooping world behind the Gymnasium contract (reset / step / close).
+
+The action is a 9-D spoon pose target (xyz in metres + 6-D rotation, world frame, the spoon tool
+frame of `shapes.py`) at `SimConfig.control_hz` (10 Hz). Underneath, the pose path from the
+previous target to the new one is cut into `ik_per_action` pieces, each solved by IK and tracked
+by joint position control for its share of the physics steps. Every reset builds a fresh world
+(new PyBullet client state), samples the food's particles from the env's seeded generator and
+lets them settle, so the same seed and actions always give the same episode.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from grits_lab.errors import InputError
+from grits_lab.geometry import matrix_to_rot6d, rot6d_to_matrix
+from grits_lab.seeding import derive_seed, make_rng
+from grits_lab.sim.cameras import CameraImage, render
+from grits_lab.sim.config import SimConfig
+from grits_lab.sim.foods import FoodSpec, level_count, load_foods, sample_particles
+from grits_lab.sim.metrics import COVERAGE_THRESHOLD, SpillTracker, classify, spoon_coverage
+from grits_lab.sim.robot import REST_POSE, PandaKinematics, pose_to_matrix, spoon_in_hand
+from grits_lab.sim.shapes import TARGET_BOWL, BowlGeometry, SpoonGeometry
+from grits_lab.sim.world import World, build_world, settle
+
+DEFAULT_FOOD = "mung_beans"
+
+
+def pose9_to_matrix(pose9: np.ndarray) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3] = rot6d_to_matrix(np.asarray(pose9[3:9], dtype=np.float64))
+    m[:3, 3] = pose9[:3]
+    return m
+
+
+def matrix_to_pose9(m: np.ndarray) -> np.ndarray:
+    return np.concatenate([m[:3, 3], matrix_to_rot6d(m[:3, :3])])
+
+
+def interpolate_pose(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
+    """Pose between (4, 4) poses a and b: linear in position, geodesic (slerp) in rotation."""
+    rel = a[:3, :3].T @ b[:3, :3]
+    angle = math.acos(np.clip((np.trace(rel) - 1) / 2, -1.0, 1.0))
+    out = np.eye(4)
+    out[:3, 3] = (1 - t) * a[:3, 3] + t * b[:3, 3]
+    if angle < 1e-9:
+        out[:3, :3] = b[:3, :3] if t >= 1 else a[:3, :3]
+        return out
+    axis = np.array([rel[2, 1] - rel[1, 2], rel[0, 2] - rel[2, 0], rel[1, 0] - rel[0, 1]])
+    if np.linalg.norm(axis) < 1e-9:  # 180 degrees: any perpendicular axis
+        w, v = np.linalg.eigh(rel + rel.T)
+        axis = v[:, -1]
+    axis = axis / np.linalg.norm(axis)
+    th = t * angle
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    out[:3, :3] = a[:3, :3] @ (np.eye(3) + math.sin(th) * k + (1 - math.cos(th)) * k @ k)
+    return out
+
+
+@dataclass
+class SceneGeometry:
+    """What an episode's layout looks like; all positions world frame, metres."""
+
+    source_bowl_center: list[float]  # bowl frame origin: centre of its bottom, on the table
+    source_bowl_radius: float  # inner radius at the rim
+    source_bowl_floor_radius: float
+    source_bowl_floor_height: float  # world z of the inner floor
+    source_bowl_rim_height: float  # world z of the rim
+    target_bowl_position: list[float]
+    target_bowl_orientation: list[float]  # quaternion xyzw
+    target_bowl_radius: float
+    target_bowl_rim_height: float
+    spoon: dict[str, float]
+    spoon_home: list[float]  # 9-D
+    cameras: list[dict[str, Any]] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def scene_geometry(config: SimConfig, target_xy: np.ndarray, source: BowlGeometry = BowlGeometry(),
+                   target: BowlGeometry = TARGET_BOWL, spoon: SpoonGeometry = SpoonGeometry()) -> SceneGeometry:
+    from grits_lab.sim.cameras import camera_to_world, intrinsics
+
+    sx, sy = config.source_bowl_xy
+    home = pose_to_matrix(np.array(config.spoon_home[:3]), np.array(config.spoon_home[3:]))
+    return SceneGeometry(
+        source_bowl_center=[sx, sy, 0.0],
+        source_bowl_radius=source.rim_radius,
+        source_bowl_floor_radius=source.floor_radius,
+        source_bowl_floor_height=source.floor_thickness,
+        source_bowl_rim_height=source.depth,
+        target_bowl_position=[float(target_xy[0]), float(target_xy[1]), 0.0],
+        target_bowl_orientation=[0.0, 0.0, 0.0, 1.0],
+        target_bowl_radius=target.rim_radius,
+        target_bowl_rim_height=target.depth,
+        spoon={"bowl_length": 2 * spoon.half_length, "bowl_width": 2 * spoon.half_width, "rim_height": spoon.rim_height,
+               "handle_length": spoon.handle_length, "handle_elevation_deg": spoon.handle_elevation_deg,
+               "bowl_area": spoon.bowl_area},
+        spoon_home=matrix_to_pose9(home).tolist(),
+        cameras=[{"name": c.name, "width": c.width, "height": c.height, "intrinsics": intrinsics(c).tolist(),
+                  "camera_to_world": camera_to_world(c).tolist()} for c in config.cameras],
+    )
+
+
+class ScoopEnv:
+    """The simulated scooping task; see the module docstring. Not thread-safe; one per process/actor."""
+
+    def __init__(self, config: SimConfig | None = None) -> None:
+        self.config = config or SimConfig()
+        self.foods = load_foods(self.config.foods_file)
+        self.kinematics = PandaKinematics()
+        self.world: World | None = None
+        self.spoon_geometry = SpoonGeometry()
+        self._hand_in_spoon = spoon_in_hand(self.spoon_geometry)
+        self._home_joints: np.ndarray | None = None
+
+    # ---- Gymnasium contract ------------------------------------------------------------------
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """Build and settle a new world.
+
+        options: `food` (name, default mung_beans), `level` (default the food's first level),
+        `food_spec` (a FoodSpec used instead of the library, e.g. `foods.primitive_food`),
+        `n_particles` (overrides the level's count), `target_xy` (target bowl centre).
+        """
+        options = dict(options or {})
+        unknown = set(options) - {"food", "level", "food_spec", "n_particles", "target_xy"}
+        if unknown:
+            raise InputError(f"unknown reset option {sorted(unknown)[0]!r}; valid: food, level, food_spec, n_particles, target_xy")
+        if seed is None:
+            seed = int(np.random.SeedSequence().entropy % (2**31))
+        self.seed = int(seed)
+        rng = make_rng(self.seed)
+        spec: FoodSpec | None = options.get("food_spec")
+        name = options.get("food", DEFAULT_FOOD if spec is None else "custom")
+        if spec is None:
+            spec = self.foods.get(name)
+        level = options.get("level", next(iter(spec.levels)))
+        count = int(options["n_particles"]) if options.get("n_particles") is not None else level_count(spec, name, level)
+        if count < 0:
+            raise InputError(f"n_particles must be >= 0, got {count}")
+        self.food_name, self.food, self.level = name, spec, level
+        components = sample_particles(spec, count, rng) if count else []
+        self.close_world()
+        joints = self._home()
+        target_xy = options.get("target_xy")
+        if target_xy is None:  # its own stream, so the layout of a seed does not depend on the food
+            layout = make_rng(derive_seed(self.seed, "target_bowl"))
+            (cx, cy), (sx, sy) = self.config.target_workspace_center, self.config.target_workspace_size
+            target_xy = (cx + layout.uniform(-sx / 2, sx / 2), cy + layout.uniform(-sy / 2, sy / 2))
+        self.world = build_world(self.config, components, rng, target_xy=tuple(target_xy), joints=joints)
+        self.world.command_joints(joints)
+        self._joint_target = joints.copy()
+        self._pose_target = self.world.spoon_matrix()
+        settle(self.world)
+        self.tracker = SpillTracker(len(self.world.particles))
+        self.step_count = 0
+        self.ik_failures = 0
+        self.initial_outside = int(self._classify().outside_source.sum())
+        return self._obs(), self._info(ik_failure=False)
+
+    def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        """Move the spoon towards the 9-D pose `action` for one control period (1 / control_hz s)."""
+        world = self._require_world()
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (9,) or not np.all(np.isfinite(a)):
+            raise InputError(f"action must be a finite 9-vector (xyz + 6-D rotation), got shape {a.shape}")
+        target = pose9_to_matrix(a)
+        start = self._pose_target
+        cfg = self.config
+        pieces = cfg.ik_per_action
+        steps = cfg.substeps
+        failed = False
+        done = 0
+        for k in range(pieces):
+            pose = interpolate_pose(start, target, (k + 1) / pieces)
+            ik = self.kinematics.solve(pose @ self._hand_in_spoon, self._joint_target, cfg.ik_position_tolerance, cfg.ik_orientation_tolerance)
+            if ik.ok:
+                self._joint_target = ik.joints
+            else:
+                failed = True
+            world.command_joints(self._joint_target)
+            n = (steps * (k + 1)) // pieces - done
+            world.step(n)
+            done += n
+        self._pose_target = target
+        self.step_count += 1
+        self.ik_failures += int(failed)
+        before = self.tracker.history[-1] if self.tracker.history else 0
+        spilled = self.tracker.update(self._classify())
+        truncated = self.step_count >= cfg.max_episode_steps
+        return self._obs(), -float(spilled - before), False, truncated, self._info(ik_failure=failed)
+
+    def close(self) -> None:
+        self.close_world()
+        self.kinematics.close()
+
+    # ---- queries -----------------------------------------------------------------------------
+    def spoon_pose(self) -> np.ndarray:
+        """(4, 4) measured pose of the spoon frame (world); place the spoon mesh's points with it."""
+        return self._require_world().spoon_matrix()
+
+    def source_bowl_pose(self) -> np.ndarray:
+        """(4, 4) pose of the source bowl frame (world); the bowl mesh is in this frame."""
+        m = np.eye(4)
+        m[:3, 3] = self._require_world().source_bowl_position
+        return m
+
+    def target_bowl_pose(self) -> np.ndarray:
+        m = np.eye(4)
+        m[:3, 3] = self._require_world().target_bowl_position
+        return m
+
+    def particle_positions(self) -> np.ndarray:
+        """(N, 3) particle centres, world frame."""
+        return self._require_world().particle_positions()
+
+    def particle_parameters(self) -> list[dict[str, Any]]:
+        """Per-component particle parameters of this episode (shape, size, count, mean dynamics)."""
+        return [p.describe() for p in self._require_world().particle_components]
+
+    def segmentation_ids(self) -> dict[str, list[int]]:
+        """Body ids seen in segmentation masks, by name: food, spoon, source_bowl, target_bowl, robot, table."""
+        w = self._require_world()
+        return {
+            "food": [int(b) for b in w.particles],
+            "spoon": [w.spoon],
+            "source_bowl": list(w.source_bowl),
+            "target_bowl": list(w.target_bowl),
+            "robot": [w.robot],
+            "table": [w.table],
+        }
+
+    def render_cameras(self) -> dict[str, CameraImage]:
+        """Render every configured camera now (slow: tens of ms per camera): name -> CameraImage."""
+        w = self._require_world()
+        return {cam.name: render(w.client, cam) for cam in self.config.cameras}
+
+    def scene(self) -> SceneGeometry:
+        return scene_geometry(self.config, self._require_world().target_bowl_position)
+
+    def metrics(self) -> dict[str, Any]:
+        """Scoop metrics of the current state (counts of particles; see grits_lab.sim.metrics)."""
+        w = self._require_world()
+        positions = w.particle_positions()
+        counts = self._classify(positions)
+        spoon = w.spoon_matrix()
+        coverage = spoon_coverage(positions[counts.lifted], w.particle_radii()[counts.lifted], spoon, self.spoon_geometry)
+        scooped = int(counts.lifted.sum())
+        success = scooped >= 1 if self.food.success_rule == "items" else coverage >= COVERAGE_THRESHOLD
+        spilled = self.tracker.current(counts)
+        return {
+            "n_particles": int(len(w.particles)),
+            "spilled": spilled,
+            "scooped": scooped,
+            "in_spoon": int(counts.in_spoon.sum()),
+            "transferred": int((counts.in_target & ~counts.in_spoon).sum()),
+            "spoon_coverage": coverage,
+            "scoop_success": bool(success),
+            "scoop_failure": not success,
+            "spillage": spilled > 0,
+            "first_spill_step": self.tracker.first_spill_step,
+            "ik_failures": self.ik_failures,
+        }
+
+    # ---- internals ---------------------------------------------------------------------------
+    def _home(self) -> np.ndarray:
+        if self._home_joints is None:
+            home = pose_to_matrix(np.array(self.config.spoon_home[:3]), np.array(self.config.spoon_home[3:]))
+            ik = self.kinematics.solve(home @ self._hand_in_spoon, np.array(REST_POSE), 0.005, 0.05)
+            if not ik.ok:
+                raise InputError(f"spoon_home {list(self.config.spoon_home)} is out of the robot's reach")
+            self._home_joints = ik.joints
+        return self._home_joints.copy()
+
+    def _classify(self, positions: np.ndarray | None = None):
+        w = self._require_world()
+        if positions is None:
+            positions = w.particle_positions()
+        return classify(positions, w.spoon_matrix(), w.source_bowl_position, w.target_bowl_position,
+                        w.source_geometry, w.target_geometry, w.spoon_geometry)
+
+    def _obs(self) -> dict[str, np.ndarray]:
+        w = self._require_world()
+        return {"ee_pose": matrix_to_pose9(w.spoon_matrix()).astype(np.float32),
+                "joint_pos": w.joint_positions().astype(np.float32)}
+
+    def _info(self, ik_failure: bool) -> dict[str, Any]:
+        return {"step": self.step_count, "spilled": self.tracker.history[-1] if self.tracker.history else 0,
+                "ik_failure": ik_failure, "ik_failures": self.ik_failures}
+
+    def _require_world(self) -> World:
+        if self.world is None:
+            raise RuntimeError("call reset() before using the environment")
+        return self.world
+
+    def close_world(self) -> None:
+        if self.world is not None:
+            self.world.close()
+            self.world = None
+

@@ -1,0 +1,266 @@
+"""The food library: particle recipes per food, loaded from YAML, validated on load, sampled per episode.
+
+A food is a recipe of one or more particle components (sphere, cube, cone or cylinder), each with
+parameter ranges (size, mass, friction, restitution, contact softness) and a share of the
+particle count, plus quantity levels (total particle counts). Shapes are drawn once per
+component per episode (one shape per batch of particles, which PyBullet creates in one call);
+mass, friction and restitution are drawn per particle. The packaged library is `foods.yaml`
+beside this file; users pass their own file with the same schema (`SimConfig.foods_file`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from grits_lab.config import config_from_dict, load_yaml
+from grits_lab.errors import ConfigError, InputError
+
+PACKAGED_FOODS = Path(__file__).with_name("foods.yaml")
+SHAPES = ("sphere", "cube", "cone", "cylinder")
+Range = tuple[float, float]
+
+
+@dataclass
+class ParticleComponent:
+    """One kind of particle in a food. Lengths in metres, mass in kg; each range is [low, high]."""
+
+    shape: Literal["sphere", "cube", "cone", "cylinder"]
+    radius: Range  # sphere/cone/cylinder radius; cube half edge
+    half_length: Range | None = None  # cone/cylinder half height (defaults to the radius)
+    fraction: float = 1.0  # share of the food's particle count
+    mass: Range = (0.0005, 0.001)
+    lateral_friction: Range = (0.5, 0.5)
+    rolling_friction: Range = (0.001, 0.001)
+    spinning_friction: Range = (0.001, 0.001)
+    restitution: Range = (0.0, 0.1)
+    # Contact softness (PyBullet contactStiffness / contactDamping); None keeps rigid contacts.
+    contact_stiffness: float | None = None
+    contact_damping: float | None = None
+    color: tuple[float, float, float, float] = (0.8, 0.7, 0.5, 1.0)
+
+
+@dataclass
+class FoodSpec:
+    """A food: its split, quantity levels (total particle counts) and particle components."""
+
+    split: Literal["train", "unseen"]
+    levels: dict[str, int]
+    components: list[ParticleComponent]
+    # Scoop success rule (paper): large pieces need one item lifted, small particles need one
+    # third of the spoon covered.
+    success_rule: Literal["items", "coverage"] = "coverage"
+    description: str = ""
+
+
+@dataclass
+class SampledParticles:
+    """One component's particles for one episode: a shared shape and per-particle dynamics."""
+
+    shape: str
+    radius: float
+    half_length: float
+    count: int
+    mass: np.ndarray  # (n,)
+    lateral_friction: np.ndarray
+    rolling_friction: np.ndarray
+    spinning_friction: np.ndarray
+    restitution: np.ndarray
+    contact_stiffness: float | None
+    contact_damping: float | None
+    color: tuple[float, float, float, float]
+
+    @property
+    def bounding_radius(self) -> float:
+        if self.shape == "sphere":
+            return self.radius
+        if self.shape == "cube":
+            return self.radius * math.sqrt(3)
+        return math.hypot(self.radius, self.half_length)
+
+    @property
+    def footprint_radius(self) -> float:
+        """Radius of the disc a resting particle covers on a surface (for spoon coverage)."""
+        if self.shape == "sphere":
+            return self.radius
+        if self.shape == "cube":
+            return self.radius * 1.128  # disc of the same area as the square face
+        # A cone or cylinder lies on its side about as often as upright; take the mean area.
+        side = math.sqrt(4 * self.radius * self.half_length / math.pi)
+        return 0.5 * (self.radius + side)
+
+    def describe(self) -> dict:
+        """Scalar summary (for dataset metadata)."""
+        return {
+            "shape": self.shape,
+            "radius": self.radius,
+            "half_length": self.half_length,
+            "count": self.count,
+            "mass_mean": float(self.mass.mean()) if self.count else 0.0,
+            "lateral_friction_mean": float(self.lateral_friction.mean()) if self.count else 0.0,
+            "rolling_friction_mean": float(self.rolling_friction.mean()) if self.count else 0.0,
+            "restitution_mean": float(self.restitution.mean()) if self.count else 0.0,
+        }
+
+
+@dataclass
+class FoodLibrary:
+    """All foods of a YAML file, by name."""
+
+    foods: dict[str, FoodSpec] = field(default_factory=dict)
+
+    def get(self, name: str) -> FoodSpec:
+        if name not in self.foods:
+            raise InputError(f"unknown food {name!r}; known foods: {', '.join(sorted(self.foods))}")
+        return self.foods[name]
+
+    def names(self, split: str | None = None) -> list[str]:
+        return [n for n, f in self.foods.items() if split is None or f.split == split]
+
+
+def _check_range(value: Range, key: str, low: float, high: float = math.inf, strict_low: bool = False) -> None:
+    lo, hi = value
+    ok_low = lo > low if strict_low else lo >= low
+    if not (ok_low and hi <= high and lo <= hi and math.isfinite(lo) and math.isfinite(hi)):
+        bound = f"> {low}" if strict_low else f">= {low}"
+        limit = "" if math.isinf(high) else f" and <= {high}"
+        raise ConfigError(f"`{key}` must be a range [low, high] with low <= high, values {bound}{limit}. Got {list(value)!r}.")
+
+
+def validate_food(name: str, food: FoodSpec, where: str = "") -> None:
+    """Range checks with messages naming the food and the key (e.g. `foods.sago.components[0].mass`)."""
+    prefix = f"{where}: " if where else ""
+    try:
+        if not food.levels:
+            raise ConfigError(f"`foods.{name}.levels` must list at least one quantity level. Got {{}}.")
+        for level, count in food.levels.items():
+            if count < 1 or count > 2000:
+                raise ConfigError(f"`foods.{name}.levels.{level}` must be a particle count in [1, 2000]. Got {count!r}.")
+        if not food.components:
+            raise ConfigError(f"`foods.{name}.components` must list at least one particle component. Got [].")
+        for i, c in enumerate(food.components):
+            key = f"foods.{name}.components[{i}]"
+            _check_range(c.radius, f"{key}.radius", 0.0015, 0.05)
+            if c.half_length is not None:
+                _check_range(c.half_length, f"{key}.half_length", 0.0015, 0.05)
+            _check_range(c.mass, f"{key}.mass", 0.0, 1.0, strict_low=True)
+            _check_range(c.lateral_friction, f"{key}.lateral_friction", 0.0, 5.0)
+            _check_range(c.rolling_friction, f"{key}.rolling_friction", 0.0, 1.0)
+            _check_range(c.spinning_friction, f"{key}.spinning_friction", 0.0, 1.0)
+            _check_range(c.restitution, f"{key}.restitution", 0.0, 1.0)
+            if not c.fraction > 0:
+                raise ConfigError(f"`{key}.fraction` must be positive. Got {c.fraction!r}.")
+            for soft in ("contact_stiffness", "contact_damping"):
+                v = getattr(c, soft)
+                if v is not None and not v > 0:
+                    raise ConfigError(f"`{key}.{soft}` must be positive. Got {v!r}.")
+            if (c.contact_stiffness is None) != (c.contact_damping is None):
+                raise ConfigError(f"`{key}`: give both contact_stiffness and contact_damping, or neither.")
+            if any(not 0.0 <= x <= 1.0 for x in c.color):
+                raise ConfigError(f"`{key}.color` must be RGBA values in [0, 1]. Got {list(c.color)!r}.")
+    except ConfigError as exc:
+        raise ConfigError(f"{prefix}{exc}") from None
+
+
+def load_foods(path: str | Path | None = None) -> FoodLibrary:
+    """Load and validate a food YAML file (the packaged library when `path` is None)."""
+    path = Path(path) if path is not None else PACKAGED_FOODS
+    data = load_yaml(path)
+    foods = data.get("foods")
+    if not isinstance(foods, dict) or not foods:
+        raise ConfigError(f"{path}: top-level key `foods` must map food names to recipes")
+    unknown = sorted(set(data) - {"foods"})
+    if unknown:
+        raise ConfigError(f"{path}: unknown top-level key `{unknown[0]}`; valid keys here: foods")
+    library = FoodLibrary()
+    for name, raw in foods.items():
+        try:
+            spec = config_from_dict(FoodSpec, raw, f"foods.{name}")
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: {exc}") from None
+        validate_food(name, spec, str(path))
+        library.foods[str(name)] = spec
+    return library
+
+
+def level_count(food: FoodSpec, name: str, level: str) -> int:
+    if level not in food.levels:
+        raise InputError(f"unknown quantity level {level!r} for food {name!r}; levels: {', '.join(food.levels)}")
+    return food.levels[level]
+
+
+def sample_particles(food: FoodSpec, count: int, rng: np.random.Generator) -> list[SampledParticles]:
+    """Draw one episode's particles: component counts by fraction, one shape per component."""
+    fractions = np.array([c.fraction for c in food.components], dtype=np.float64)
+    fractions /= fractions.sum()
+    counts = np.floor(fractions * count).astype(int)
+    counts[np.argmax(fractions)] += count - counts.sum()
+    out = []
+    for c, n in zip(food.components, counts):
+        radius = float(rng.uniform(*c.radius))
+        half_length = float(rng.uniform(*c.half_length)) if c.half_length is not None else radius
+        n = int(n)
+        out.append(
+            SampledParticles(
+                shape=c.shape,
+                radius=radius,
+                half_length=half_length,
+                count=n,
+                mass=rng.uniform(*c.mass, size=n),
+                lateral_friction=rng.uniform(*c.lateral_friction, size=n),
+                rolling_friction=rng.uniform(*c.rolling_friction, size=n),
+                spinning_friction=rng.uniform(*c.spinning_friction, size=n),
+                restitution=rng.uniform(*c.restitution, size=n),
+                contact_stiffness=c.contact_stiffness,
+                contact_damping=c.contact_damping,
+                color=tuple(c.color),
+            )
+        )
+    return [p for p in out if p.count > 0]
+
+
+def primitive_food(
+    shape: str,
+    rng: np.random.Generator,
+    radius: Range = (0.0025, 0.010),
+    mass: Range = (0.0001, 0.005),
+    friction: Range = (0.0, 1.0),
+    layer_size: int = 16,
+    layers: tuple[int, int] = (4, 12),
+) -> tuple[FoodSpec, int]:
+    """A random single-shape food for the spillage dataset, as in the authors' generator.
+
+    Radius / half length uniform in 2.5-10 mm, mass 0.1-5 g, friction 0-1 and a count of whole
+    layers of 16 particles. Ranges collapse to the drawn value, so the episode's particles
+    share one parameter set (returned FoodSpec, particle count).
+    """
+    if shape not in SHAPES:
+        raise InputError(f"unknown particle shape {shape!r}; shapes: {', '.join(SHAPES)}")
+    r = float(rng.uniform(*radius))
+    hl = float(rng.uniform(*radius)) if shape in ("cone", "cylinder") else r
+    m = float(rng.uniform(*mass))
+    mu = float(rng.uniform(*friction))
+    # Large particles fill the bowl with fewer items: cap the count by the bowl's floor capacity.
+    n_layers = int(rng.integers(layers[0], layers[1] + 1))
+    count = layer_size * n_layers
+    # The source bowl holds about 0.75 l; fill at most 40% of it with the particles' bounding spheres.
+    capacity = int(0.4 * 0.00075 / ((4 / 3) * math.pi * max(r, hl) ** 3))
+    count = max(layer_size, min(count, capacity - capacity % layer_size))
+    comp = ParticleComponent(
+        shape=shape,  # type: ignore[arg-type]
+        radius=(r, r),
+        half_length=(hl, hl),
+        mass=(m, m),
+        lateral_friction=(mu, mu),
+        rolling_friction=(0.001, 0.001),
+        spinning_friction=(0.001, 0.001),
+        restitution=(0.05, 0.05),
+        color=(0.85, 0.65, 0.3, 1.0),
+    )
+    spec = FoodSpec(split="train", levels={"trial": count}, components=[comp],
+                    success_rule="items" if r >= 0.007 else "coverage", description=f"random {shape} particles")
+    return spec, count

@@ -1,0 +1,109 @@
+"""Episode metrics from particle states: where each particle is (source bowl, spoon, target bowl, spilled).
+
+Definitions (all from particle centres, world frame):
+- in spoon: inside the spoon bowl's elliptical footprint (widened by its slanted rim) and within
+  4 cm above its floor, in the spoon frame.
+- in target bowl: inside the target bowl's rim cylinder, below its rim plus 3 cm.
+- outside the source bowl: beyond the source bowl's outer rim radius, or below its rim and
+  beyond the outer face of its slanted wall (e.g. on the table under the rim's overhang).
+- spilled: outside the source bowl and neither in the spoon nor in the target bowl. A particle
+  counted as spilled stays spilled (it lies on the table) unless it ends in the target bowl;
+  particles above the source bowl (falling back from the spoon) are not spilled.
+- scooped: in the spoon and above the source bowl's rim (lifted out of the food).
+- spoon coverage: the fraction of the spoon bowl's elliptical floor covered by the footprints
+  (discs of each particle's footprint radius) of the scooped particles, projected on the spoon
+  floor and rasterized on a 1 mm grid; stacked particles are counted once. The paper's rule: a
+  scoop succeeds if it lifts one large item, or covers one third of the spoon (small particles).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from grits_lab.sim.shapes import BowlGeometry, SpoonGeometry
+
+SPOON_RIM_MARGIN = 0.009  # the rim wall leans out ~7 mm beyond the floor ellipse
+SPOON_MAX_HEIGHT = 0.04
+COVERAGE_THRESHOLD = 1.0 / 3.0
+_GRID = 0.001
+
+
+@dataclass
+class ParticleCounts:
+    """Per-particle classification at one instant."""
+
+    in_spoon: np.ndarray  # (N,) bool
+    in_target: np.ndarray
+    outside_source: np.ndarray
+    lifted: np.ndarray  # in the spoon and above the source bowl's rim
+
+
+def in_spoon_mask(positions: np.ndarray, spoon_pose: np.ndarray, spoon: SpoonGeometry) -> np.ndarray:
+    local = (positions - spoon_pose[:3, 3]) @ spoon_pose[:3, :3]
+    a = spoon.half_length + SPOON_RIM_MARGIN
+    b = spoon.half_width + SPOON_RIM_MARGIN
+    inside = (local[:, 0] / a) ** 2 + (local[:, 1] / b) ** 2 <= 1.0
+    return inside & (local[:, 2] > -0.006) & (local[:, 2] < SPOON_MAX_HEIGHT)
+
+
+def in_bowl_cylinder(positions: np.ndarray, bowl_position: np.ndarray, bowl: BowlGeometry, above: float) -> np.ndarray:
+    d = positions - bowl_position
+    r = np.linalg.norm(d[:, :2], axis=1)
+    return (r < bowl.outer_radius) & (d[:, 2] < bowl.depth + above) & (d[:, 2] > -0.01)
+
+
+def outside_bowl(positions: np.ndarray, bowl_position: np.ndarray, bowl: BowlGeometry) -> np.ndarray:
+    d = positions - bowl_position
+    r = np.linalg.norm(d[:, :2], axis=1)
+    wall_outer = bowl.inner_radius_at(d[:, 2]) + bowl.wall_thickness / np.cos(bowl.slant_angle) + 0.002
+    return (r > bowl.outer_radius + 0.003) | ((d[:, 2] < bowl.depth) & (r > wall_outer)) | (d[:, 2] < -0.01)
+
+
+def classify(positions: np.ndarray, spoon_pose: np.ndarray, source_position: np.ndarray, target_position: np.ndarray,
+             source: BowlGeometry, target: BowlGeometry, spoon: SpoonGeometry) -> ParticleCounts:
+    in_spoon = in_spoon_mask(positions, spoon_pose, spoon)
+    lifted = in_spoon & (positions[:, 2] > source_position[2] + source.depth)
+    return ParticleCounts(
+        in_spoon=in_spoon,
+        in_target=in_bowl_cylinder(positions, target_position, target, above=0.03),
+        outside_source=outside_bowl(positions, source_position, source),
+        lifted=lifted,
+    )
+
+
+def spoon_coverage(positions: np.ndarray, radii: np.ndarray, spoon_pose: np.ndarray, spoon: SpoonGeometry) -> float:
+    """Fraction of the spoon floor ellipse covered by the footprints of `positions` (N, 3)."""
+    if len(positions) == 0:
+        return 0.0
+    xs = np.arange(-spoon.half_length, spoon.half_length + _GRID, _GRID)
+    ys = np.arange(-spoon.half_width, spoon.half_width + _GRID, _GRID)
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    cells = (gx / spoon.half_length) ** 2 + (gy / spoon.half_width) ** 2 <= 1.0
+    px, py = gx[cells], gy[cells]
+    local = (positions - spoon_pose[:3, 3]) @ spoon_pose[:3, :3]
+    d2 = (px[:, None] - local[None, :, 0]) ** 2 + (py[:, None] - local[None, :, 1]) ** 2
+    covered = (d2 <= radii[None, :] ** 2).any(axis=1)
+    return float(covered.mean())
+
+
+class SpillTracker:
+    """Keeps the sticky per-particle spilled flags and the spilled count after every action step."""
+
+    def __init__(self, n_particles: int) -> None:
+        self.spilled_flags = np.zeros(n_particles, dtype=bool)
+        self.history: list[int] = []
+        self.first_spill_step = -1
+
+    def update(self, counts: ParticleCounts) -> int:
+        now = counts.outside_source & ~counts.in_spoon & ~counts.in_target
+        self.spilled_flags |= now
+        spilled = int((self.spilled_flags & ~counts.in_target).sum())
+        if spilled > 0 and self.first_spill_step < 0:
+            self.first_spill_step = len(self.history)
+        self.history.append(spilled)
+        return spilled
+
+    def current(self, counts: ParticleCounts) -> int:
+        return int((self.spilled_flags & ~counts.in_target).sum())

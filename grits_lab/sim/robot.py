@@ -1,0 +1,115 @@
+"""The Franka Panda with the spoon in its hand: IK on a private kinematic copy, joint position control.
+
+IK runs on a second, kinematics-only PyBullet client holding just the Panda, so solving and
+checking a pose (forward kinematics of the solution) never disturbs the simulated world. A pose
+whose IK residual exceeds the tolerance is an IK failure: the arm keeps its last reachable joint
+target (as a real controller rejects an unreachable goal) and the failure is counted.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as pb
+import pybullet_data
+from pybullet_utils.bullet_client import BulletClient
+
+from grits_lab.geometry import matrix_to_quat, quat_to_matrix
+from grits_lab.sim.shapes import SpoonGeometry
+
+PANDA_URDF = "franka_panda/panda.urdf"
+ARM_JOINTS = tuple(range(7))
+FINGER_JOINTS = (9, 10)
+GRASP_LINK = 11  # panda_grasptarget
+ARM_FORCES = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
+# A comfortable configuration with the hand pointing forward and down: the IK null-space target.
+REST_POSE = (0.0, 0.2, 0.0, -2.0, 0.0, 2.6, 0.785)
+
+
+def pose_to_matrix(position: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3] = quat_to_matrix(np.asarray(quat_xyzw, dtype=np.float64))
+    m[:3, 3] = position
+    return m
+
+
+def matrix_to_pose(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return m[:3, 3].copy(), matrix_to_quat(m[:3, :3])
+
+
+def spoon_in_hand(spoon: SpoonGeometry) -> np.ndarray:
+    """(4, 4) pose of the hand's grasp frame in the spoon frame."""
+    m = np.eye(4)
+    m[:3, :3] = spoon.hand_from_spoon_rotation()
+    m[:3, 3] = spoon.grasp_point()
+    return m
+
+
+@dataclass
+class IKResult:
+    joints: np.ndarray  # (7,)
+    position_error: float
+    orientation_error: float
+    ok: bool
+
+
+class PandaKinematics:
+    """IK and forward kinematics of the Panda's grasp frame, on its own DIRECT client."""
+
+    def __init__(self, base_position: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+        from grits_lab.sim.world import connect_direct
+
+        self.client = connect_direct()
+        self.client.setAdditionalSearchPath(pybullet_data.getDataPath())
+        self.robot = self.client.loadURDF(PANDA_URDF, base_position, useFixedBase=True)
+        self.lower, self.upper = [], []
+        for j in range(self.client.getNumJoints(self.robot)):
+            info = self.client.getJointInfo(self.robot, j)
+            if info[2] != pb.JOINT_FIXED:
+                self.lower.append(info[8])
+                self.upper.append(info[9])
+        self.ranges = [u - l for l, u in zip(self.lower, self.upper)]
+        self.rest = list(REST_POSE) + [0.006, 0.006]
+
+    def set_joints(self, joints: np.ndarray) -> None:
+        for j, q in zip(ARM_JOINTS, joints):
+            self.client.resetJointState(self.robot, j, float(q))
+
+    def forward(self, joints: np.ndarray) -> np.ndarray:
+        """(4, 4) grasp-frame pose for arm joints (7,)."""
+        self.set_joints(joints)
+        state = self.client.getLinkState(self.robot, GRASP_LINK, computeForwardKinematics=True)
+        return pose_to_matrix(np.array(state[4]), np.array(state[5]))
+
+    def solve(self, target: np.ndarray, seed_joints: np.ndarray, pos_tol: float, rot_tol: float) -> IKResult:
+        """IK for a (4, 4) grasp-frame target, starting from `seed_joints`; checks the residual by FK."""
+        position, quat = matrix_to_pose(target)
+        self.set_joints(seed_joints)
+        best = None
+        for attempt in range(4):
+            # The first solve pulls towards the rest pose (null space) to keep a natural elbow;
+            # later ones refine from the previous solution without it, which reaches poses the
+            # null-space pull would stop short of.
+            extra = dict(lowerLimits=self.lower, upperLimits=self.upper, jointRanges=self.ranges, restPoses=self.rest) if attempt == 0 else {}
+            sol = self.client.calculateInverseKinematics(
+                self.robot, GRASP_LINK, position.tolist(), quat.tolist(), maxNumIterations=100, residualThreshold=1e-5, **extra,
+            )
+            joints = np.clip(np.array(sol[:7]), self.lower[:7], self.upper[:7])
+            reached = self.forward(joints)
+            perr = float(np.linalg.norm(reached[:3, 3] - position))
+            rdiff = reached[:3, :3].T @ target[:3, :3]
+            rerr = float(math.acos(np.clip((np.trace(rdiff) - 1) / 2, -1.0, 1.0)))
+            if best is None or perr + 0.05 * rerr < best.position_error + 0.05 * best.orientation_error:
+                best = IKResult(joints, perr, rerr, perr <= pos_tol and rerr <= rot_tol)
+            if perr < 1e-4 and rerr < 1e-3:
+                break
+        assert best is not None
+        return best
+
+    def close(self) -> None:
+        try:
+            self.client.disconnect()
+        except pb.error:
+            pass
