@@ -67,7 +67,7 @@ class CheckpointPaths:
 class ScoopSettings:
     """The learned scoop: receding-horizon execution and when the scoop counts as complete."""
 
-    max_steps: int = 80  # actions (10 Hz) before the scoop is cut off
+    max_steps: int = 120  # actions (10 Hz) before the scoop is cut off (SCONE's probe included)
     # A planned chunk that moves the spoon less than this (metres, every waypoint) ends the scoop:
     # the policy holds its final pose, as demonstrations do after they finish.
     still_tolerance: float = 0.004
@@ -107,8 +107,8 @@ class RuleBasedSettings:
 
     dig_depth: float = 0.05
     entry_pitch_deg: float = 35.0  # spoon tip down while digging
-    drag: float = 0.06  # metres of the scooping stroke along the spoon's x
-    lift_height: float = 0.20
+    drag: float = 0.054  # metres of the scooping stroke along the spoon's x, centred on the bowl
+    lift_height: float = 0.09  # above the rim at the end
     steps_per_segment: int = 8
 
 
@@ -119,7 +119,7 @@ class SconeSettings:
     probe_depth: float = 0.03  # metres the spoon's tip is pushed below the first contact
     probe_step: float = 0.004  # metres per action while probing
     contact_force: float = 0.05  # newtons on the spoon that count as touching the food
-    reference_resistance: float = 2.0  # N per cm; the scoop's depth is scaled by ref / measured
+    reference_resistance: float = 0.5  # N per cm; the scoop's depth is scaled by ref / measured
     min_depth_scale: float = 0.5
     max_depth_scale: float = 1.3
 

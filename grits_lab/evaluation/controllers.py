@@ -3,6 +3,8 @@
 The protocol (duck-typed, so the baselines in grits_lab/policies need not import this module):
 
     controller.cloud_steps: int          newest steps whose composite cloud the controller reads
+    controller.stops_when_still: bool    (optional) a chunk that holds the pose ends the scoop
+    controller.n_action_steps: int       (optional) actions executed per chunk; default all
     controller.reset(scene) -> None      once per episode, before the first plan
     controller.plan(history, scene) -> Chunk | None
                                          the next actions (k, 9) world frame; None ends the scoop
@@ -73,6 +75,8 @@ class DiffusionController:
     dp and grits with rho = 0 see the very same noise and produce the very same episode.
     """
 
+    stops_when_still = True
+
     def __init__(self, policy: Any, predictor: Any, sampler_kind: str, guidance: Any, posthoc: Any, raw_cloud: bool = False) -> None:
         from grits_lab.sampling import DDIMSampler, GuidanceConfig, PostHocConfig, PostHocSampler
 
@@ -130,6 +134,8 @@ class DiffusionController:
 
 class BCController:
     """Behavior cloning: one deterministic regression of the next chunk per plan."""
+
+    stops_when_still = True
 
     def __init__(self, policy: Any) -> None:
         self.policy = policy

@@ -33,6 +33,8 @@ def run_scoop(env: Any, controller: Any, scene: EpisodeScene, history: ObsHistor
     cloud_steps = int(getattr(controller, "cloud_steps", 0))
     image_steps = int(getattr(controller, "image_steps", 0))
     n_exec = settings.n_action_steps or getattr(controller, "n_action_steps", None)
+    # Learned policies never say "done": they hold their last pose, as the demonstrations end.
+    stops_when_still = bool(getattr(controller, "stops_when_still", False))
     encoder = getattr(getattr(getattr(controller, "policy", None), "config", None), "obs_encoder", None)
 
     def observe() -> None:
@@ -58,7 +60,7 @@ def run_scoop(env: Any, controller: Any, scene: EpisodeScene, history: ObsHistor
         plan_times.append(chunk.plan_time_s)
         if chunk.diagnostics:
             diagnostics.append(chunk.diagnostics)
-        if steps >= settings.min_steps and is_still(chunk, history.ee_pose[-1], settings.still_tolerance):
+        if stops_when_still and steps >= settings.min_steps and is_still(chunk, history.ee_pose[-1], settings.still_tolerance):
             stop_reason = "policy_holds"
             break
         actions = chunk.actions[: n_exec or len(chunk.actions)]

@@ -70,20 +70,24 @@ class RuleBasedController:
         surface = food_surface_height(scene.food_points(), bowl, geometry.floor_radius, fallback=floor + 0.01)
         pitch = math.radians(s.entry_pitch_deg)
         spoon = scene.spoon_geometry()
-        # The spoon's centre may go no lower than the floor plus the tip's drop at the entry pitch.
-        lowest = floor + spoon.half_length * math.sin(pitch) + 0.006
-        dig_z = max(surface - s.dig_depth + spoon.half_length * math.sin(pitch), lowest)
+        # Dig: the spoon's centre goes 5 cm below the surface, but its tip (lower by half a spoon
+        # length times sin(pitch)) stays a few millimetres above the floor.
+        floor_clear = lambda p: floor + spoon.half_length * math.sin(max(p, 0.0)) + 0.004
+        dig_z = max(surface - s.dig_depth, floor_clear(pitch))
+        stroke_pitch = math.radians(10.0)
+        stroke_z = max(surface - s.dig_depth, floor_clear(stroke_pitch))
         start_xy = bowl[:2] - np.array([s.drag / 2, 0.0])
         end_xy = bowl[:2] + np.array([s.drag / 2, 0.0])
         current = history.ee_pose[-1].astype(np.float64)
-        above = pitch_pose(np.array([bowl[0], bowl[1], rim + 0.06]), 0.0)
+        above = pitch_pose(np.array([start_xy[0], start_xy[1], rim + 0.06]), 0.0)
         entry_above = pitch_pose(np.array([start_xy[0], start_xy[1], rim + 0.03]), pitch)
         dig = pitch_pose(np.array([start_xy[0], start_xy[1], dig_z]), pitch)
-        stroke = pitch_pose(np.array([end_xy[0], end_xy[1], dig_z + 0.01]), math.radians(-20.0))
-        lift = pitch_pose(np.array([end_xy[0], end_xy[1], bowl[2] + s.lift_height]), math.radians(-10.0))
+        stroke = pitch_pose(np.array([end_xy[0] - 0.012, end_xy[1], stroke_z]), stroke_pitch)
+        tilt = pitch_pose(np.array([end_xy[0], end_xy[1], stroke_z + 0.006]), math.radians(-12.0))
+        lift = pitch_pose(np.array([end_xy[0] - 0.01, end_xy[1], rim + s.lift_height]), math.radians(-12.0))
         n = s.steps_per_segment
         waypoints = (_segment(current, above, n) + _segment(above, entry_above, n) + _segment(entry_above, dig, n)
-                     + _segment(dig, stroke, 2 * n) + _segment(stroke, lift, 2 * n))
+                     + _segment(dig, stroke, 2 * n) + _segment(stroke, tilt, n) + _segment(tilt, lift, 2 * n))
         self.done = True
         self.measured = {"surface_height": surface, "dig_z": dig_z}
         return Chunk(np.stack(waypoints), {"surface_height": surface})
