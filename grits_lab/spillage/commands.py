@@ -14,6 +14,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Train the spillage predictor on a spillage dataset; a rerun resumes after the last finished epoch.",
     )
     parser.add_argument("config", help="experiment YAML (e.g. experiments/predictor_cpu.yaml)")
+    parser.add_argument("--dataset", help="training dataset directory (overrides data.dataset in the config)")
+    parser.add_argument("--output-dir", help="where runs are written (overrides output_dir in the config)")
     parser.add_argument("--restart", action="store_true", help="discard the run's checkpoints and start from epoch 1")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar or per-epoch lines")
     parser.add_argument("--eval", metavar="DATASET", help="only score a checkpoint on every chunk of this (held-out) spillage dataset")
@@ -28,6 +30,10 @@ def _run(args: argparse.Namespace) -> int:
     from grits_lab.spillage.training import run_dir
 
     config = load_config(args.config, PredictorConfig)
+    if args.dataset:
+        config.data.dataset = args.dataset
+    if args.output_dir:
+        config.output_dir = args.output_dir
     if args.eval is None:
         from grits_lab.spillage.training import train_predictor
 

@@ -94,11 +94,10 @@ def test_cli_trains_evaluates_and_reports_bad_input_in_one_line(tmp_path, tiny_d
     cfg_path.write_text(yaml.safe_dump({
         "name": "cli", "output_dir": str(tmp_path / "runs"),
         "model": {"dp3": {"hidden_dims": [16], "out_dim": 16}},
-        "data": {"dataset": str(tiny_dataset)},
         "train": {"epochs": 1, "batch_size": 16, "num_threads": 1},
     }))
-    assert main(["train", "predictor", str(cfg_path), "--no-progress"]) == 0
-    assert main(["train", "predictor", str(cfg_path), "--eval", str(tiny_dataset)]) == 0
+    assert main(["train", "predictor", str(cfg_path), "--no-progress", "--dataset", str(tiny_dataset)]) == 0
+    assert main(["train", "predictor", str(cfg_path), "--dataset", str(tiny_dataset), "--eval", str(tiny_dataset)]) == 0
     assert (tmp_path / "runs" / "cli" / "eval_tiny.json").exists()
     capsys.readouterr()
     bad = tmp_path / "bad.yaml"
@@ -109,6 +108,5 @@ def test_cli_trains_evaluates_and_reports_bad_input_in_one_line(tmp_path, tiny_d
     demos = tmp_path / "demos"
     (demos / "episodes").mkdir(parents=True)
     (demos / "dataset.yaml").write_text("kind: demos\n")
-    cfg_path.write_text(cfg_path.read_text().replace(str(tiny_dataset), str(demos)))
-    assert main(["train", "predictor", str(cfg_path), "--restart"]) == 2
+    assert main(["train", "predictor", str(cfg_path), "--restart", "--dataset", str(demos)]) == 2
     assert "kind 'spillage'" in capsys.readouterr().err
