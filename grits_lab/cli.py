@@ -21,6 +21,7 @@ COMMAND_MODULES = [
     "grits_lab.sim.commands",
     "grits_lab.tune.commands",
     "grits_lab.report.commands",
+    "grits_lab.evaluation.commands",
 ]
 
 # Modules that register `grits-lab train <what>` subcommands.

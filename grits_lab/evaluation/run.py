@@ -267,3 +267,21 @@ def evaluate_guidance(config_path: str | Path, episodes: list[dict[str, Any]], g
 
 def evaluate_file(path: str | Path, overrides: dict[str, Any] | None = None, **kwargs: Any) -> pd.DataFrame:
     return evaluate(load_evaluation_config(path, overrides), **kwargs)
+
+
+def summary_table(records: pd.DataFrame) -> str:
+    """Per method: episodes, errors, and rates with Wilson 95% intervals (the report layer's statistics)."""
+    from grits_lab.report.stats import wilson_interval
+
+    if records.empty:
+        return "no episodes"
+    lines = [f"{'method':<16} {'n':>4} {'err':>4}  {'task success':<22} {'spillage':<22} {'scoop failure':<22}"]
+    for method, rows in records.groupby("method", sort=False):
+        errors = rows["error"].fillna("").astype(str).str.len() > 0
+        cells = []
+        for column in ("task_success", "spillage", "scoop_failure"):
+            k = int((rows[column].astype(bool) & ~errors).sum()) if column == "task_success" else int(rows[column].astype(bool).sum())
+            lo, hi = wilson_interval(k, len(rows))
+            cells.append(f"{k / len(rows):5.0%} [{lo:4.0%}, {hi:4.0%}]")
+        lines.append(f"{method:<16} {len(rows):>4} {int(errors.sum()):>4}  " + " ".join(f"{c:<22}" for c in cells))
+    return "\n".join(lines)
