@@ -15,6 +15,7 @@ def register(subparsers: Any) -> None:
     )
     collect.add_argument("config", help="collection config, e.g. experiments/demos_quick.yaml")
     collect.add_argument("--output", help="dataset directory (overrides `output:` in the config)")
+    collect.add_argument("--seed", type=int, help="root seed (overrides `seed:`; e.g. a held-out copy of a dataset)")
     collect.add_argument("--workers", type=int, help="number of parallel workers (overrides executor.workers)")
     collect.add_argument("--address", help="Ray cluster address (overrides executor.address and RAY_ADDRESS)")
     collect.add_argument("--serial", action="store_true", help="run in this process, without Ray")
@@ -36,6 +37,8 @@ def _collect(args: argparse.Namespace) -> int:
     config = load_collect_config(args.config)
     if args.output:
         config.output = args.output
+    if args.seed is not None:
+        config.seed = args.seed
     if args.workers is not None:
         if args.workers < 1:
             from grits_lab.errors import InputError

@@ -81,7 +81,7 @@ class DemoEpisodeParams:
 def plan_demos(config: DemosConfig) -> list[EpisodeSpec]:
     """One spec per (food, level, bowl configuration), seeds derived from the root seed."""
     from grits_lab.config import config_from_dict
-    from grits_lab.sim import SimConfig
+    from grits_lab.sim.config import SimConfig
     from grits_lab.sim.foods import load_foods
 
     sim = config_from_dict(SimConfig, config.sim, "sim")
@@ -106,3 +106,69 @@ def plan_demos(config: DemosConfig) -> list[EpisodeSpec]:
                     )
                 )
     return specs[: config.max_episodes] if config.max_episodes else specs
+
+
+def _images(cameras: list[dict[str, Any]], config: ImageConfig) -> np.ndarray:
+    """(cams, 4, H, W) float16: RGB in [0, 1] and depth in metres, resized to the policy's resolution."""
+    from PIL import Image
+
+    size = (config.width, config.height)
+    out = []
+    for cam in cameras:
+        rgb = Image.fromarray(np.asarray(cam["rgb"], dtype=np.uint8)[..., :3]).resize(size, Image.BILINEAR)
+        depth = Image.fromarray(np.asarray(cam["depth"], dtype=np.float32)).resize(size, Image.NEAREST)
+        out.append(np.concatenate([np.asarray(rgb, dtype=np.float32).transpose(2, 0, 1) / 255.0, np.asarray(depth)[None]]))
+    return np.stack(out).astype(np.float16)
+
+
+def demo_episode(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
+    """Run the randomized scripted expert for one (food, level, bowl configuration); record every step.
+
+    The target bowl's placement (the bowl configuration) and the expert's randomization are drawn
+    from the episode's seed, so the episode replays exactly from its spec.
+    """
+    from grits_lab.config import config_fingerprint
+    from grits_lab.perception.scene import builder_for_env, camera_list, scene_clouds
+    from grits_lab.sim.expert import expert_trajectory
+
+    p: DemoEpisodeParams = spec.params["demo"]
+    env = context.env(p.sim)
+    builder = context.cached(("cloud-builder", config_fingerprint(p.cloud)), lambda: builder_for_env(p.cloud, env))
+    obs, info = env.reset(seed=spec.seed, options={"food": spec.food, "level": spec.level})
+    plan = expert_trajectory(env.scene(), make_rng(derive_seed(spec.seed, "expert")), env.config.control_hz)
+    actions, ee_poses, joints, clouds, images, spilled = [], [], [], [], [], []
+    for t, action in enumerate(plan):
+        rendered = env.render_cameras()
+        clouds.append(scene_clouds(builder, env, seed=derive_seed(spec.seed, "cloud", t), cameras=rendered)["cloud"].astype(np.float16))
+        if p.images.enabled:
+            images.append(_images(camera_list(rendered, p.images.cameras), p.images))
+        ee_poses.append(np.asarray(obs["ee_pose"], dtype=np.float32))
+        joints.append(np.asarray(obs["joint_pos"], dtype=np.float32))
+        actions.append(np.asarray(action, dtype=np.float32))
+        obs, _, terminated, truncated, info = env.step(action)
+        spilled.append(int(info["spilled"]))
+        if terminated or truncated:
+            break
+    metrics = env.metrics()
+    arrays = {
+        "action": np.stack(actions),
+        "ee_pose": np.stack(ee_poses),
+        "joint_pos": np.stack(joints),
+        "cloud": np.stack(clouds),
+        "spilled_over_time": np.asarray(spilled, dtype=np.int32),
+    }
+    if images:
+        arrays["rgbd"] = np.stack(images)
+    meta = {
+        "food": spec.food,
+        "split": p.food_split,
+        "level": spec.level,
+        "seed": spec.seed,
+        "bowl_config": p.bowl_config,
+        "steps": len(actions),
+        "target_bowl_x": float(env.target_bowl_pose()[0, 3]),
+        "target_bowl_y": float(env.target_bowl_pose()[1, 3]),
+        "spilled_any": bool(metrics["spilled"] > 0),
+        **{k: v for k, v in metrics.items() if isinstance(v, (bool, int, float, str)) or v is None},
+    }
+    return {"arrays": arrays, "meta": meta}

@@ -46,7 +46,7 @@ def run_collection(config: Any, progress: bool = True) -> dict[str, Any]:
         base = np.load(base_path)  # the one this dataset started with: resume stays identical
     else:
         base = base_trajectory(config)
-        from grits_lab.io import save_npz_atomic, atomic_path
+        from grits_lab.io import atomic_path
 
         with atomic_path(base_path) as tmp:
             with open(tmp, "wb") as fh:

@@ -70,11 +70,10 @@ class SpillageConfig:
     shapes: list[str] = field(default_factory=lambda: list(SHAPES))
     chunk_len: int = 12
     # Base trajectory: a (T, 9)/(T, 7) .npy file or a demonstrations dataset directory (the mean
-    # of its `action`s); null = the mean of `base_expert_plans` scripted-expert plans.
+    # of its `action`s); null = the scripted expert: its nominal (unrandomized) scoop when
+    # base_expert_plans is 0, else the time-normalized mean of that many randomized expert plans.
     base_trajectory: str | None = None
-    base_expert_plans: int = 16
-    base_food: str = "mung_beans"
-    base_level: str = "medium"
+    base_expert_plans: int = 0
     # Candidates tried per shape before giving up on unfilled buckets, as a multiple of the
     # shape's share of `trials`.
     max_candidates_factor: float = 20.0
@@ -91,7 +90,7 @@ class SpillageConfig:
         require(len(self.shapes) >= 1 and set(self.shapes) <= set(SHAPES), "shapes", self.shapes, f"a non-empty subset of {SHAPES}")
         require(self.trials % len(self.shapes) == 0, "trials", self.trials, f"a multiple of the number of shapes ({len(self.shapes)})")
         require(self.chunk_len >= 1, "chunk_len", self.chunk_len, "at least 1")
-        require(self.base_expert_plans >= 1, "base_expert_plans", self.base_expert_plans, "at least 1")
+        require(self.base_expert_plans >= 0, "base_expert_plans", self.base_expert_plans, "non-negative")
         require(self.max_candidates_factor >= 1, "max_candidates_factor", self.max_candidates_factor, "at least 1")
 
     def identity(self) -> dict[str, Any]:
@@ -199,7 +198,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
     from grits_lab.config import config_from_dict
     from grits_lab.data.balance import BalancedAcceptor
     from grits_lab.data.collect import Progress, failure_record
-    from grits_lab.sim import SimConfig
+    from grits_lab.sim.config import SimConfig
 
     sim = config_from_dict(SimConfig, config.sim, "sim")
     targets = config.targets()
@@ -287,3 +286,106 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
     }
     writer.finalize(summary, complete=all(acceptor.full(s) for s in config.shapes))
     return summary
+
+
+def _sim_config(config: SpillageConfig) -> Any:
+    from grits_lab.sim.config import SimConfig
+
+    return config_from_dict(SimConfig, config.sim, "sim")
+
+
+def source_bowl_region(config: SpillageConfig) -> dict[str, Any]:
+    """Where the source bowl is and how wide it is at each height (for keeping shifts feasible)."""
+    from grits_lab.sim.shapes import BowlGeometry
+
+    sim = _sim_config(config)
+    geometry = BowlGeometry()
+    return {
+        "center": np.array([sim.source_bowl_xy[0], sim.source_bowl_xy[1], 0.0]),
+        "inner_radius_at": geometry.inner_radius_at,
+        "rim_height": geometry.depth,
+        "floor_height": geometry.floor_thickness,
+    }
+
+
+def expert_mean_trajectory(config: SpillageConfig) -> np.ndarray:
+    """The scripted expert's nominal scoop, or the mean of `base_expert_plans` randomized ones (T, 9)."""
+    from grits_lab.data.trajectories import mean_trajectory
+    from grits_lab.sim.env import scene_geometry
+    from grits_lab.sim.expert import expert_trajectory, nominal_expert_trajectory
+
+    sim = _sim_config(config)
+    scene = scene_geometry(sim, np.asarray(sim.target_workspace_center))
+    if config.base_expert_plans == 0:
+        return nominal_expert_trajectory(scene, sim.control_hz).astype(np.float64)
+    plans = [
+        expert_trajectory(scene, make_rng(derive_seed(config.seed, "base-plan", i)), sim.control_hz)
+        for i in range(config.base_expert_plans)
+    ]
+    return mean_trajectory(plans)
+
+
+def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
+    """Run one candidate: random primitive food, the spec's trajectory, clouds at every chunk start."""
+    from grits_lab.config import config_fingerprint
+    from grits_lab.perception.scene import builder_for_env, scene_clouds
+    from grits_lab.sim.foods import primitive_food
+
+    p: SpillageTrialParams = spec.params["trial"]
+    env = context.env(p.sim)
+    builder = context.cached(("cloud-builder", config_fingerprint(p.cloud)), lambda: builder_for_env(p.cloud, env))
+    pr = p.particles
+    food, count = primitive_food(
+        p.shape, make_rng(derive_seed(spec.seed, "food")), radius=tuple(pr.radius), mass=tuple(pr.mass),
+        friction=tuple(pr.friction), layer_size=pr.layer_size, layers=tuple(pr.layers),
+    )
+    obs, info = env.reset(seed=spec.seed, options={"food_spec": food, "n_particles": count})
+    spilled_before = int(info["spilled"])
+    trajectory = np.asarray(spec.trajectory, dtype=np.float32)
+    spilled, clouds, clouds_raw, visible = [], [], [], []
+    for t, action in enumerate(trajectory):
+        if t % p.chunk_len == 0:
+            c = scene_clouds(builder, env, seed=derive_seed(spec.seed, "cloud", t), raw=p.raw_cloud)
+            clouds.append(c["cloud"].astype(np.float16))
+            if p.raw_cloud:
+                clouds_raw.append(c["cloud_raw"].astype(np.float16))
+                visible.append(c["raw_points"]["food"])
+        obs, _, terminated, truncated, info = env.step(action)
+        spilled.append(int(info["spilled"]))
+        if terminated or truncated:
+            break
+    trajectory = trajectory[: len(spilled)]
+    chunk_start, chunk_spilled = chunk_labels(np.asarray(spilled), p.chunk_len, spilled_before)
+    metrics = env.metrics()
+    component = env.particle_parameters()[0] if count else {}
+    arrays = {
+        "trajectory": trajectory,
+        "chunk_start": chunk_start.astype(np.int32),
+        "chunk_cloud": np.stack(clouds)[: len(chunk_start)],
+        "chunk_spilled": chunk_spilled.astype(bool),
+        "spilled_over_time": np.asarray(spilled, dtype=np.int32),
+    }
+    if p.raw_cloud:
+        arrays["chunk_cloud_raw"] = np.stack(clouds_raw)[: len(chunk_start)]
+    meta = {
+        "shape": p.shape,
+        "seed": spec.seed,
+        "label": int(chunk_spilled.any()),
+        "n_particles": int(metrics["n_particles"]),
+        "spilled": int(metrics["spilled"]),
+        "scooped": int(metrics["scooped"]),
+        "scoop_success": bool(metrics["scoop_success"]),
+        "ik_failures": int(metrics["ik_failures"]),
+        "chunk_len": p.chunk_len,
+        "steps": int(len(spilled)),
+        "shift_x": p.shift[0],
+        "shift_y": p.shift[1],
+        "shift_z": p.shift[2],
+        "shift_scale": p.shift_scale,
+        "radius": float(component.get("radius", 0.0)),
+        "half_length": float(component.get("half_length", 0.0)),
+        "mass": float(component.get("mass_mean", 0.0)),
+        "friction": float(component.get("lateral_friction_mean", 0.0)),
+        "min_visible_food_points": int(min(visible)) if visible else -1,
+    }
+    return {"arrays": arrays, "meta": meta}

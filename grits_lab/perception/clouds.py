@@ -1,8 +1,9 @@
 """Depth + segmentation to world-frame points, per-object point sets, and farthest-point sampling to exactly N.
 
-Camera convention (the sim's `render_cameras()`): depth is metric distance along the optical axis
-(z-depth, 0 or non-finite where invalid), `intrinsics` is the pinhole matrix K of the image in
-OpenCV axes (x right, y down, z forward), and `cam_to_world` maps those camera axes to the world.
+Camera convention (the sim's `render_cameras()`, grits_lab/sim/cameras.py): depth is metric
+distance along the optical axis (z-depth, 0 or non-finite where invalid); pixel (u, v) (column,
+row, 0-based) at depth z is the camera point ((u - cx) z / fx, (v - cy) z / fy, z) in OpenCV axes
+(x right, y down, z forward); `cam_to_world` maps those camera axes to the world.
 """
 
 from __future__ import annotations
@@ -28,8 +29,8 @@ def depth_to_points(
     v, u = np.nonzero(valid)
     z = depth[v, u]
     k = np.asarray(intrinsics, dtype=np.float64)
-    x = (u + 0.5 - k[0, 2]) * z / k[0, 0]
-    y = (v + 0.5 - k[1, 2]) * z / k[1, 1]
+    x = (u - k[0, 2]) * z / k[0, 0]
+    y = (v - k[1, 2]) * z / k[1, 1]
     cam = np.stack([x, y, z], axis=1)
     return transform_points(cam, cam_to_world)
 

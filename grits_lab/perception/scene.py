@@ -29,11 +29,22 @@ def as_matrix(pose: Any) -> np.ndarray:
     raise ValueError(f"cannot read a pose of shape {arr.shape}")
 
 
-def camera_list(rendered: Any) -> list[Mapping[str, np.ndarray]]:
-    """The sim's `render_cameras()` output (dict by camera name, or list) as a list in a stable order."""
-    if isinstance(rendered, Mapping):
-        return [rendered[name] for name in sorted(rendered)]
-    return list(rendered)
+def camera_list(rendered: Any, names: list[str] | None = None) -> list[dict[str, np.ndarray]]:
+    """The sim's `render_cameras()` output (name -> CameraImage) as dicts in the config's camera order.
+
+    names: keep only these cameras (None or empty: all).
+    """
+    items = list(rendered.items()) if isinstance(rendered, Mapping) else [(getattr(c, "name", str(i)), c) for i, c in enumerate(rendered)]
+    out = []
+    for name, cam in items:
+        if names and name not in names:
+            continue
+        if isinstance(cam, Mapping):
+            out.append(dict(cam))
+        else:
+            out.append({"rgb": cam.rgb, "depth": cam.depth, "segmentation": cam.segmentation,
+                        "intrinsics": cam.intrinsics, "cam_to_world": cam.camera_to_world})
+    return out
 
 
 def _ids(value: Any) -> list[int]:

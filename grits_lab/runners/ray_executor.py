@@ -53,6 +53,12 @@ class _EpisodeWorker:
     def pid(self) -> int:
         return os.getpid()
 
+    def peak_rss_mb(self) -> float:
+        """Peak resident memory of this worker process so far (Linux reports kB)."""
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
     def run(self, spec: EpisodeSpec) -> EpisodeResult:
         result = execute_spec(spec, self._context)
         result.spec = None  # the driver still has it; do not ship trajectories back
@@ -100,7 +106,9 @@ class RayExecutor(Executor):
             if address:
                 ray.init(address=address, **kwargs)
             else:
-                ray.init(num_cpus=num_cpus or os.cpu_count() or 1, **kwargs)
+                # "local": always a fresh Ray of our own, even if a stale address file of an
+                # earlier `ray start` is left in the temp dir.
+                ray.init(address="local", num_cpus=num_cpus or os.cpu_count() or 1, **kwargs)
             self._owns_ray = True
         cluster_cpus = float(ray.cluster_resources().get("CPU", 0.0))
         fit = int(math.floor(cluster_cpus / cpus_per_worker + 1e-9))
@@ -136,6 +144,10 @@ class RayExecutor(Executor):
     def worker_pids(self) -> list[int]:
         """Process ids of the current actors (for monitoring, and for fault-injection tests)."""
         return ray.get([s.actor.pid.remote() for s in self._slots])
+
+    def worker_peak_rss_mb(self) -> list[float]:
+        """Peak resident memory of each current actor (MB)."""
+        return ray.get([s.actor.peak_rss_mb.remote() for s in self._slots])
 
     def submit(self, spec: EpisodeSpec) -> None:
         self._queue.append((spec.replace(work=resolve_work_path(spec.work)), 1))

@@ -83,7 +83,7 @@ class WorkerContext:
         key = config_fingerprint(sim_config)
         if self._env is None or key != self._env_key:
             self.close_env()
-            from grits_lab.sim import ScoopEnv
+            from grits_lab.sim.env import ScoopEnv
 
             self._env = ScoopEnv(sim_config)
             self._env_key = key

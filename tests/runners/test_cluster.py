@@ -34,6 +34,15 @@ def ray_head():
     try:
         yield f"127.0.0.1:{port}"
     finally:
+        # `ray start` records the head's address for later `ray.init()` calls; drop our entry
+        # so that nothing tries to connect to this cluster after it is gone.
+        current = "/tmp/ray/ray_current_cluster"
+        try:
+            with open(current) as fh:
+                if fh.read().strip().endswith(f":{port}"):
+                    os.remove(current)
+        except OSError:
+            pass
         for sig in (signal.SIGTERM, signal.SIGKILL):
             try:
                 os.killpg(proc.pid, sig)

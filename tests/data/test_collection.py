@@ -1,0 +1,156 @@
+"""Real collection on the simulator: episode contents, clouds where objects are, resume == uninterrupted."""
+
+import numpy as np
+import pytest
+
+from grits_lab.config import config_from_dict
+from grits_lab.data.collect import DatasetWriter
+from grits_lab.data.demos import DemosConfig, plan_demos
+from grits_lab.data.format import list_episode_files, load_index, read_episode
+from grits_lab.data.jobs import run_collection
+from grits_lab.data.spillage import SpillageConfig, chunk_labels, expert_mean_trajectory
+from grits_lab.data.trajectories import shift_trajectory
+from grits_lab.runners import SerialExecutor
+from grits_lab.runners.work import WorkerContext, execute_spec, resolve_work_path
+from grits_lab.sim.shapes import BowlGeometry
+
+SMALL_CAMERAS = [
+    {"name": "front", "eye": [1.05, -0.15, 0.55], "target": [0.5, -0.1, 0.03], "width": 96, "height": 72},
+    {"name": "side", "eye": [0.5, -0.75, 0.5], "target": [0.5, -0.05, 0.03], "width": 96, "height": 72},
+]
+
+
+def test_chunk_labels_mark_chunks_where_the_count_rises():
+    counts = np.array([0, 0, 0, 1, 1, 1, 1, 3, 3])
+    starts, spilled = chunk_labels(counts, 3)
+    np.testing.assert_array_equal(starts, [0, 3, 6])
+    np.testing.assert_array_equal(spilled, [False, True, True])  # chunk 1: count before it was 0
+    starts, spilled = chunk_labels(np.array([2, 2, 2]), 2, spilled_before=2)
+    np.testing.assert_array_equal(spilled, [False, False])
+
+
+def test_shifts_keep_the_spoon_inside_the_bowl():
+    config = SpillageConfig()
+    base = expert_mean_trajectory(config)
+    bowl = BowlGeometry()
+    center = np.array([0.5, -0.15, 0.0])
+    for shift in ([0.07, 0.05, -0.05], [-0.07, -0.05, -0.05], [0.0, 0.0, 0.05]):
+        traj, scale = shift_trajectory(base, np.array(shift), center, bowl.inner_radius_at, bowl.depth, bowl.floor_thickness)
+        rel = traj[:, :3] - center
+        inside = rel[:, 2] < bowl.depth
+        radial = np.linalg.norm(rel[inside, :2], axis=1)
+        base_rel = base[:, :3] - center
+        base_excess = np.max(np.linalg.norm(base_rel[:, :2], axis=1) - (bowl.inner_radius_at(base_rel[:, 2]) - 0.02))
+        assert np.all(radial - (bowl.inner_radius_at(rel[inside, 2]) - 0.02) <= max(base_excess, 0) + 1e-6)
+        assert np.all(rel[inside, 2] >= bowl.floor_thickness + 0.005 - 1e-6) or scale == 0.0
+        assert 0.0 <= scale <= 1.0
+    # an upward shift is always feasible and applied in full
+    _, scale = shift_trajectory(base, np.array([0.0, 0.0, 0.05]), center, bowl.inner_radius_at, bowl.depth, bowl.floor_thickness)
+    assert scale == 1.0
+
+
+def _short_spillage_config(tmp_path, **overrides):
+    base = expert_mean_trajectory(SpillageConfig())[:26]
+    np.save(tmp_path / "base.npy", base)
+    data = {
+        "kind": "spillage", "output": str(tmp_path / "spill"), "trials": 2, "spill_fraction": 0.0, "shapes": ["sphere"],
+        "base_trajectory": str(tmp_path / "base.npy"), "particles": {"layers": [1, 1], "radius": [0.004, 0.006]},
+        "cloud": {"n_points": 200, "cad_surface_samples": 2000}, "sim": {"cameras": SMALL_CAMERAS},
+        "executor": {"backend": "serial"},
+    }
+    data.update(overrides)
+    return config_from_dict(SpillageConfig, data)
+
+
+def test_spillage_trial_clouds_have_n_points_where_the_objects_are(tmp_path):
+    from grits_lab.data.jobs import base_trajectory
+    from grits_lab.data.spillage import _sim_config, make_trial_spec, source_bowl_region
+
+    config = _short_spillage_config(tmp_path)
+    spec = make_trial_spec(config, _sim_config(config), base_trajectory(config), source_bowl_region(config), "sphere", 0)
+    ctx = WorkerContext()
+    try:
+        result = execute_spec(spec.replace(work=resolve_work_path(spec.work)), ctx)
+        assert result.ok, result.traceback
+        env = ctx._env
+        bowl = env.source_bowl_pose()
+    finally:
+        ctx.close()
+    arrays, meta = result.payload["arrays"], result.payload["meta"]
+    c = len(arrays["chunk_start"])
+    assert c == 3 and arrays["trajectory"].shape == (26, 9)
+    for key in ("chunk_cloud", "chunk_cloud_raw"):
+        assert arrays[key].shape == (c, 3, 200, 3) and arrays[key].dtype == np.float16
+    assert meta["label"] == int(arrays["chunk_spilled"].any())
+    assert meta["n_particles"] == 16
+    # the first cloud is taken before any motion: the food is in the source bowl
+    first = arrays["chunk_cloud"][0].astype(np.float64)
+    rel_food = first[0] - bowl[:3, 3]
+    assert np.all(np.linalg.norm(rel_food[:, :2], axis=1) < 0.09) and np.all((rel_food[:, 2] > -0.01) & (rel_food[:, 2] < 0.08))
+    rel_bowl = first[2] - bowl[:3, 3]
+    assert np.all(np.linalg.norm(rel_bowl[:, :2], axis=1) < 0.09) and np.all((rel_bowl[:, 2] > -0.01) & (rel_bowl[:, 2] < 0.07))
+    assert np.isfinite(arrays["chunk_cloud_raw"].astype(np.float64)).all()
+    assert set(np.unique(arrays["chunk_start"] % 12)) == {0}
+
+
+def test_resume_after_interruption_gives_the_uninterrupted_dataset(tmp_path, monkeypatch):
+    config = _short_spillage_config(tmp_path)
+    run_collection(config, progress=False)
+    full = {p.name: read_episode(p) for p in list_episode_files(config.output)}
+    assert len(full) == 2
+
+    class Interrupt(SerialExecutor):
+        polls = 0
+
+        def poll(self, timeout=None):
+            if Interrupt.polls == 1:
+                raise KeyboardInterrupt
+            Interrupt.polls += 1
+            return super().poll(timeout)
+
+    second = _short_spillage_config(tmp_path, output=str(tmp_path / "spill2"))
+    import grits_lab.runners.config as runner_config
+
+    with monkeypatch.context() as m:  # the job is stopped (as by Ctrl-C) after its first episode
+        m.setattr(runner_config, "make_executor", lambda cfg: Interrupt())
+        with pytest.raises(KeyboardInterrupt):
+            run_collection(second, progress=False)
+    assert len(list_episode_files(second.output)) == 1
+    run_collection(second, progress=False)  # resumes
+    resumed = {p.name: read_episode(p) for p in list_episode_files(second.output)}
+    assert sorted(resumed) == sorted(full)
+    for name, (arrays, meta) in full.items():
+        r_arrays, r_meta = resumed[name]
+        assert r_meta == meta
+        for key in arrays:
+            np.testing.assert_array_equal(r_arrays[key], arrays[key])
+    a, b = load_index(config.output), load_index(second.output)
+    assert a.drop(columns="file").equals(b.drop(columns="file"))
+
+
+def test_demo_episode_records_every_step(tmp_path):
+    config = config_from_dict(DemosConfig, {
+        "output": str(tmp_path / "demos"), "foods": ["dried_jujube"], "levels": ["low"], "bowl_configs": 1,
+        "cloud": {"n_points": 128, "cad_surface_samples": 1000}, "sim": {"cameras": SMALL_CAMERAS},
+        "images": {"enabled": True, "height": 24, "width": 32}, "executor": {"backend": "serial"},
+    })
+    summary = run_collection(config, progress=False)
+    assert summary["episodes"] == 1 and summary["failed"] == 0
+    (path,) = list_episode_files(config.output)
+    arrays, meta = read_episode(path)
+    t = meta["steps"]
+    assert t > 40
+    assert arrays["action"].shape == (t, 9) and arrays["ee_pose"].shape == (t, 9) and arrays["joint_pos"].shape == (t, 7)
+    assert arrays["cloud"].shape == (t, 3, 128, 3) and arrays["cloud"].dtype == np.float16
+    assert arrays["rgbd"].shape == (t, 2, 4, 24, 32)
+    # the spoon follows the commanded poses: measured pose at t+1 is near the command at t
+    err = np.linalg.norm(arrays["ee_pose"][1:, :3] - arrays["action"][:-1, :3], axis=1)
+    assert np.median(err) < 0.02
+    # the spoon cloud is centred near the measured spoon position (handle included, so loosely)
+    spoon_centroid = arrays["cloud"][:, 1].astype(np.float64).mean(axis=1)
+    assert np.median(np.linalg.norm(spoon_centroid - arrays["ee_pose"][:, :3], axis=1)) < 0.08
+    for key in ("food", "split", "level", "seed", "bowl_config", "scoop_success", "spilled", "n_particles"):
+        assert key in meta
+    assert meta["food"] == "dried_jujube" and meta["split"] == "train"
+    index = load_index(config.output)
+    assert list(index["episode_id"]) == ["dried_jujube-low-b0"]

@@ -1,0 +1,56 @@
+"""Clouds of a live simulated scene: exactly N points per object, each where its object is."""
+
+import numpy as np
+import pytest
+
+from grits_lab.config import config_from_dict
+from grits_lab.perception import CloudConfig
+from grits_lab.perception.scene import builder_for_env, scene_clouds
+from grits_lab.sim.config import SimConfig
+from grits_lab.sim.env import ScoopEnv
+from grits_lab.sim.shapes import BowlGeometry
+
+
+@pytest.fixture(scope="module")
+def env():
+    cams = [
+        {"name": "front", "eye": [1.05, -0.15, 0.55], "target": [0.5, -0.1, 0.03], "width": 128, "height": 96},
+        {"name": "side", "eye": [0.5, -0.75, 0.5], "target": [0.5, -0.05, 0.03], "width": 128, "height": 96},
+    ]
+    e = ScoopEnv(config_from_dict(SimConfig, {"cameras": cams}))
+    e.reset(seed=3, options={"food": "soybeans", "level": "low"})
+    # hold the spoon just above the food, inside the bowl, so all three objects are in view together
+    yield e
+    e.close()
+
+
+def test_every_object_has_n_points_where_the_object_is(env):
+    builder = builder_for_env(CloudConfig(n_points=3000), env)
+    out = scene_clouds(builder, env, seed=0, raw=True)
+    particles = env.particle_positions()
+    spoon, bowl = env.spoon_pose(), env.source_bowl_pose()
+    for key in ("cloud", "cloud_raw"):
+        assert out[key].shape == (3, 3000, 3) and out[key].dtype == np.float32
+        assert np.isfinite(out[key]).all()
+    radius = 0.0045  # soybeans: 3.6-4.2 mm
+    for key, tol in (("cloud", 1e-3), ("cloud_raw", 0.012)):
+        food = out[key][0]
+        nearest = np.min(np.linalg.norm(food[:, None, :] - particles[None, :, :], axis=-1), axis=1)
+        assert np.quantile(nearest, 0.95) < radius + tol, key
+    # spoon CAD points: in the spoon frame they lie within the spoon's extent (bowl + handle)
+    local = (out["cloud"][1] - spoon[:3, 3]) @ spoon[:3, :3]
+    assert np.all((local[:, 0] > -0.14) & (local[:, 0] < 0.045) & (np.abs(local[:, 1]) < 0.031) & (local[:, 2] > -0.006) & (local[:, 2] < 0.09))
+    g = BowlGeometry()
+    rel = out["cloud"][2] - bowl[:3, 3]
+    assert np.all(np.linalg.norm(rel[:, :2], axis=1) <= g.outer_radius + 1e-3) and np.all((rel[:, 2] > -0.003) & (rel[:, 2] < g.depth + 1e-3))
+    # the raw bowl is a partial, noisy view of the same bowl
+    raw_rel = out["cloud_raw"][2] - bowl[:3, 3]
+    assert np.quantile(np.linalg.norm(raw_rel[:, :2], axis=1), 0.95) < g.outer_radius + 0.01
+    assert out["raw_points"]["food"] > 50
+
+
+def test_same_seed_same_cloud_and_fps_spreads_the_food(env):
+    builder = builder_for_env(CloudConfig(n_points=500, cad_surface_samples=4000), env)
+    a = scene_clouds(builder, env, seed=1)["cloud"]
+    b = scene_clouds(builder, env, seed=1)["cloud"]
+    np.testing.assert_array_equal(a, b)
