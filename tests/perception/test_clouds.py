@@ -22,7 +22,7 @@ def _sphere_scene(center, radius, height=1.0, size=64):
     """Ray-cast a sphere over a floor at z=0: depth and segmentation (1 = sphere, 2 = floor)."""
     cam = _look_down_camera(height)
     v, u = np.mgrid[0:size, 0:size]
-    rays = np.stack([(u + 0.5 - K[0, 2]) / K[0, 0], (v + 0.5 - K[1, 2]) / K[1, 1], np.ones_like(u, float)], -1)
+    rays = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u, float)], -1)
     dirs = rays @ cam[:3, :3].T  # world direction for unit camera z
     origin = cam[:3, 3]
     oc = origin - center
