@@ -153,3 +153,29 @@ def test_bad_inputs_fail_with_one_clear_error(demo_dataset, tmp_path):
         policy.predict_action({"ee_pose": np.zeros((2, 9))})
     with pytest.raises(InputError, match="NaN"):
         policy.predict_action({"ee_pose": np.full((2, 9), np.nan), "cloud": np.zeros((2, 3, 32, 3))})
+
+
+@pytest.mark.parametrize("kind", ["rgbd", "lowdim"])
+def test_other_encoders_learn_from_their_observation(kind):
+    torch.manual_seed(0)
+    raw = {
+        **TINY_POLICY,
+        "obs_encoder": {"kind": kind, "image_size": [64, 64], "resnet_width": 8, "resnet_blocks": [1, 1, 1, 1],
+                        "num_keypoints": 4, "feature_dim": 8, "cameras": 2},
+    }
+    policy = DiffusionPolicy(config_from_dict(DiffusionPolicyConfig, raw))
+    rng = np.random.default_rng(0)
+    policy.fit_normalizers(rng.uniform(0, 1, (50, 9)), rng.uniform(0, 1, (50, 9)))
+    batch = {"action": torch.rand(4, 16, 9), "ee_pose": torch.rand(4, 2, 9)}
+    if kind == "rgbd":
+        rgbd = torch.rand(4, 2, 2, 4, 48, 64)
+        rgbd[..., 3, :, :] *= 1.5  # depth in metres
+        batch["rgbd"] = rgbd.half()
+    loss = policy.compute_loss(batch)
+    loss.backward()
+    assert torch.isfinite(loss)
+    if kind == "rgbd":
+        assert policy.obs_encoder.stem[0].weight.grad.abs().sum() > 0
+    policy.eval()
+    single = {k: v[0].numpy() for k, v in batch.items() if k != "action"}
+    assert policy.predict_action(single).shape == (12, 9)

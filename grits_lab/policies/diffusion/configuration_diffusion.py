@@ -6,8 +6,9 @@ optional batch axis in front):
     ee_pose  (n_obs, 9)            measured spoon pose, world frame (always used)
     cloud    (n_obs, 3, N, 3)      composite cloud, objects ("food", "spoon", "bowl"), world frame
                                    (encoder kind "pointcloud"; any N >= `points_per_object`)
-    rgbd     (n_obs, cams, 4, H, W) RGB + depth per camera (encoder kind "rgbd"); uint8 RGB, depth
-                                   in metres as float, or all four channels uint8 (depth / 255 * depth_max)
+    rgbd     (n_obs, cams, 4, H, W) RGB + depth per camera (encoder kind "rgbd"): float with RGB in
+                                   [0, 1] and depth in metres (the demonstration format), or all four
+                                   channels uint8 (depth quantized over [0, depth_max])
 """
 
 from __future__ import annotations
@@ -42,7 +43,8 @@ class ObsEncoderConfig:
         require(len(self.point_hidden) >= 1 and min(self.point_hidden) > 0, "obs_encoder.point_hidden", self.point_hidden, "a non-empty list of positive widths")
         require(self.feature_dim > 0, "obs_encoder.feature_dim", self.feature_dim, "positive")
         require(self.cloud_steps >= 1, "obs_encoder.cloud_steps", self.cloud_steps, "at least 1")
-        require(min(self.image_size) >= 16, "obs_encoder.image_size", self.image_size, "at least 16 x 16")
+        # the trunk downsamples 32x; spatial softmax needs a feature map of at least 2 x 2
+        require(min(self.image_size) >= 64, "obs_encoder.image_size", self.image_size, "at least 64 x 64")
         require(self.resnet_width >= 8 and self.resnet_width % 8 == 0, "obs_encoder.resnet_width", self.resnet_width, "a multiple of 8 (GroupNorm groups)")
         require(min(self.resnet_blocks) >= 1, "obs_encoder.resnet_blocks", self.resnet_blocks, "at least 1 block per stage")
         require(self.num_keypoints >= 1, "obs_encoder.num_keypoints", self.num_keypoints, "at least 1")

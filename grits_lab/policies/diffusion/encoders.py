@@ -116,14 +116,13 @@ class RGBDEncoder(nn.Module):
 
 
 def rgbd_to_unit(rgbd: torch.Tensor, depth_max: float) -> torch.Tensor:
-    """(..., 4, H, W) stored RGB-D -> float in [0, 1]: RGB / 255; depth clipped to depth_max and scaled.
+    """(..., 4, H, W) stored RGB-D -> float in [0, 1]: RGB as is, depth clipped to depth_max and scaled.
 
-    uint8 input is read as four 0-255 channels (depth already quantized over [0, depth_max]);
-    float input is read as RGB in 0-255 and depth in metres.
+    Float input follows the demonstration format (grits_lab/data/demos.py): RGB in [0, 1], depth
+    in metres. uint8 input is read as four 0-255 channels (depth already quantized over [0, depth_max]).
     """
     if rgbd.dtype == torch.uint8:
         return rgbd.float() / 255.0
     x = rgbd.float()
-    rgb = x[..., :3, :, :] / 255.0
     depth = x[..., 3:, :, :].clamp(0, depth_max) / depth_max
-    return torch.cat([rgb, depth], dim=-3)
+    return torch.cat([x[..., :3, :, :].clamp(0, 1), depth], dim=-3)
