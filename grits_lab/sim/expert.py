@@ -28,13 +28,13 @@ class Keyframe:
 
 # Forward is +x of the world (away from the robot); the scoop runs from the near to the far side.
 KEYFRAMES = (
-    Keyframe(1.5, (-0.032, 0.0, 0.05), 35.0, above_rim=True),
-    Keyframe(2.5, (-0.034, 0.0, 0.021), 30.0),
-    Keyframe(3.5, (-0.005, 0.0, 0.010), 12.0),
-    Keyframe(4.2, (0.010, 0.0, 0.010), 0.0),
-    Keyframe(4.9, (0.012, 0.0, 0.016), -15.0),
-    Keyframe(6.0, (0.008, 0.0, 0.08), -15.0, above_rim=True),
-    Keyframe(6.4, (0.008, 0.0, 0.08), -15.0, above_rim=True),
+    Keyframe(1.5, (-0.036, 0.0, 0.05), 35.0, above_rim=True),
+    Keyframe(2.5, (-0.038, 0.0, 0.016), 25.0),
+    Keyframe(3.6, (-0.008, 0.0, 0.007), 14.0),
+    Keyframe(4.4, (0.010, 0.0, 0.004), 4.0),
+    Keyframe(5.1, (0.012, 0.0, 0.011), -14.0),
+    Keyframe(6.3, (0.006, 0.0, 0.06), -14.0, above_rim=True),
+    Keyframe(6.7, (0.006, 0.0, 0.06), -14.0, above_rim=True),
 )
 
 

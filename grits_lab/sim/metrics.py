@@ -1,8 +1,8 @@
 """Episode metrics from particle states: where each particle is (source bowl, spoon, target bowl, spilled).
 
 Definitions (all from particle centres, world frame):
-- in spoon: inside the spoon bowl's elliptical footprint (widened by its slanted rim) and within
-  4 cm above its floor, in the spoon frame.
+- in spoon: inside the spoon bowl's elliptical footprint (widened by its slanted rim) and between
+  its floor and 4 cm above it, in the spoon frame.
 - in target bowl: inside the target bowl's rim cylinder, below its rim plus 3 cm.
 - outside the source bowl: beyond the source bowl's outer rim radius, or below its rim and
   beyond the outer face of its slanted wall (e.g. on the table under the rim's overhang).
@@ -45,7 +45,7 @@ def in_spoon_mask(positions: np.ndarray, spoon_pose: np.ndarray, spoon: SpoonGeo
     a = spoon.half_length + SPOON_RIM_MARGIN
     b = spoon.half_width + SPOON_RIM_MARGIN
     inside = (local[:, 0] / a) ** 2 + (local[:, 1] / b) ** 2 <= 1.0
-    return inside & (local[:, 2] > -0.006) & (local[:, 2] < SPOON_MAX_HEIGHT)
+    return inside & (local[:, 2] > 0.0) & (local[:, 2] < SPOON_MAX_HEIGHT)
 
 
 def in_bowl_cylinder(positions: np.ndarray, bowl_position: np.ndarray, bowl: BowlGeometry, above: float) -> np.ndarray:

@@ -37,7 +37,7 @@ class BowlGeometry:
     Defaults: the source bowl of the authors' scene, about 17 cm across at the rim and 6.5 cm deep.
     """
 
-    floor_radius: float = 0.045  # inner radius at the floor
+    floor_radius: float = 0.035  # inner radius at the floor
     rim_radius: float = 0.080  # inner radius at the rim
     depth: float = 0.065  # outer height: table to rim
     wall_thickness: float = 0.006
@@ -70,12 +70,13 @@ class SpoonGeometry:
 
     half_length: float = 0.030  # inner semi-axis along x (6 cm long)
     half_width: float = 0.020  # inner semi-axis along y (4 cm wide)
-    wall_height: float = 0.010  # slant length of the bowl's rim wall
+    wall_height: float = 0.010  # slant length of the bowl's rim wall at the back and sides
+    lip_height: float = 0.0  # slant length at the tip: no lip, so the thin edge slides under food
     wall_slant_deg: float = 50.0  # rim wall leaning outwards from the normal (a low, open lip)
-    thickness: float = 0.003
+    thickness: float = 0.002
     segments: int = 10  # with 5 floor strips and the handle: 16 boxes, one PyBullet compound
     handle_length: float = 0.12
-    handle_elevation_deg: float = 60.0  # handle rises steeply (like a ladle) so it clears the bowl rim
+    handle_elevation_deg: float = 70.0  # handle rises steeply (like a ladle) so it clears the bowl rim
     handle_width: float = 0.012
     handle_thickness: float = 0.004
 
@@ -171,11 +172,13 @@ def spoon_boxes(g: SpoonGeometry) -> list[Box]:
     boxes += _ellipse_strips(g.half_length + t, g.half_width + t, t, -t / 2, strips=5)
     slant = math.radians(g.wall_slant_deg)
     extra = t
-    length = g.wall_height + extra
     for k in range(g.segments):
         th0 = 2 * math.pi * k / g.segments
         th1 = 2 * math.pi * (k + 1) / g.segments
         thm = (th0 + th1) / 2
+        # The rim is lowest at the tip (+x) and rises to full height at the sides and back.
+        height = g.wall_height - (g.wall_height - g.lip_height) * max(0.0, math.cos(thm)) ** 2
+        length = height + extra
         p0 = np.array([g.half_length * math.cos(th0), g.half_width * math.sin(th0)])
         p1 = np.array([g.half_length * math.cos(th1), g.half_width * math.sin(th1)])
         pm = np.array([g.half_length * math.cos(thm), g.half_width * math.sin(thm)])
@@ -186,15 +189,14 @@ def spoon_boxes(g: SpoonGeometry) -> list[Box]:
         rot = _rot_z(yaw) @ _rot_y(slant)
         up = np.array([normal[0] * math.sin(slant), normal[1] * math.sin(slant), math.cos(slant)])
         out = np.array([normal[0] * math.cos(slant), normal[1] * math.cos(slant), -math.sin(slant)])
-        centre = np.array([pm[0], pm[1], 0.0]) + up * (g.wall_height - extra) / 2 + out * t / 2
+        centre = np.array([pm[0], pm[1], 0.0]) + up * (height - extra) / 2 + out * t / 2
         width = chord * 1.25 + t
         boxes.append(Box((t / 2, width / 2, length / 2), tuple(centre), _quat_from_matrix(rot)))
     e = math.radians(g.handle_elevation_deg)
     start = np.array([-g.half_length - 0.004, 0.0, g.rim_height * 0.5])
     direction = np.array([-math.cos(e), 0.0, math.sin(e)])
     centre = start + direction * g.handle_length / 2
-    rot = _rot_y(-e)  # box x axis along the handle direction (pointing back and up)
-    rot = rot @ _rot_z(math.pi)
+    rot = _rot_y(e - math.pi)  # box x axis along the handle: (-cos e, 0, sin e), back and up
     boxes.append(Box((g.handle_length / 2 + 0.006, g.handle_width / 2, g.handle_thickness / 2), tuple(centre), _quat_from_matrix(rot)))
     return boxes
 
