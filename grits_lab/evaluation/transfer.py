@@ -106,12 +106,14 @@ def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
     pour_point = np.array([target.centre[0], target.centre[1], target.rim_height + pour_height])
     waypoints = []
     waypoints += _line(start, np.array([start[0], start[1], safe_z]), rotation, max_step)
+    lifted = len(waypoints) - 1  # the vertical lift leaves the source bowl by design
     waypoints += _line(waypoints[-1][:3].astype(np.float64), above_target, rotation, max_step)
     waypoints += _line(above_target, pour_point, rotation, max_step)
     path = np.stack(waypoints)
-    # The descent ends inside the target's cylinder by design: check only the way there.
+    # The lift starts in the source bowl and the descent ends in the target's cylinder by design:
+    # check the way between them.
     others = [ob for ob in obstacles if np.linalg.norm(ob.centre_xy - target.centre[:2]) > 1e-3]
-    if not path_is_clear(path, others, spoon_reach):
+    if not path_is_clear(path, others, spoon_reach, start_index=lifted):
         raise InputError("no collision-free transfer path at the configured clearance")
     return path
 

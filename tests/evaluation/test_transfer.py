@@ -1,0 +1,56 @@
+"""Transfer: the target bowl is found from the cameras (segmentation + depth), and paths avoid the bowls."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from grits_lab.evaluation.scene import EpisodeScene
+from grits_lab.evaluation.transfer import Obstacle, fit_circle, locate_bowl, path_is_clear, plan_transfer
+from grits_lab.perception.composite import CloudConfig
+from grits_lab.perception.scene import builder_for_env
+from grits_lab.sim import ScoopEnv, SimConfig
+
+
+@pytest.fixture(scope="module")
+def env():
+    env = ScoopEnv(SimConfig())
+    yield env
+    env.close()
+
+
+def test_circle_fit_recovers_an_arc():
+    angles = np.linspace(0.2, 2.0, 50)
+    xy = np.stack([0.3 + 0.06 * np.cos(angles), -0.1 + 0.06 * np.sin(angles)], 1)
+    centre, radius, residual = fit_circle(xy)
+    np.testing.assert_allclose(centre, [0.3, -0.1], atol=1e-9)
+    assert abs(radius - 0.06) < 1e-9 and residual < 1e-9
+
+
+@pytest.mark.parametrize("target_xy", [(0.38, 0.15), (0.62, 0.36), (0.5, 0.25)])
+def test_target_bowl_located_within_a_few_cm(env, target_xy):
+    env.reset(seed=1, options={"food": "chocolate_balls", "level": "low", "target_xy": target_xy})
+    scene = EpisodeScene(env, builder_for_env(CloudConfig(n_points=32, cad_surface_samples=400), env), seed=1)
+    estimate = locate_bowl(scene.object_points("target_bowl"))
+    error = np.linalg.norm(estimate.centre[:2] - np.asarray(target_xy))
+    assert error < 0.02, error
+    assert abs(estimate.rim_height - env.world.target_geometry.depth) < 0.01
+
+
+def test_transfer_path_goes_over_the_bowls_and_ends_above_the_target(env):
+    env.reset(seed=2, options={"food": "chocolate_balls", "level": "low", "target_xy": (0.45, 0.3)})
+    scene = EpisodeScene(env, builder_for_env(CloudConfig(n_points=32, cad_surface_samples=400), env), seed=2)
+    target = locate_bowl(scene.object_points("target_bowl"))
+    source = env.world.source_geometry
+    src = env.world.source_bowl_position
+    obstacles = [Obstacle(src[:2], source.outer_radius, src[2] + source.depth), Obstacle(target.centre[:2], target.rim_radius, target.rim_height)]
+    start = np.concatenate([src + [0, 0, 0.08], [1, 0, 0, 0, 1, 0]]).astype(np.float32)
+    path = plan_transfer(start, target, obstacles, clearance=0.04, pour_height=0.05, max_step=0.012, spoon_reach=0.036)
+    assert np.linalg.norm(path[-1, :2] - target.centre[:2]) < 1e-6
+    above = int(np.argmax(path[:, 2] >= path[:, 2].max() - 1e-9))  # first waypoint at the safe height
+    assert path_is_clear(path, obstacles[:1], 0.036, start_index=above)
+    assert np.all(np.linalg.norm(np.diff(path[:, :3], axis=0), axis=1) <= 0.012 + 1e-6)
+    np.testing.assert_allclose(path[:, 3:], np.tile([1, 0, 0, 0, 1, 0], (len(path), 1)), atol=1e-6)  # level all the way
+    low = start.copy()
+    low[2] = src[2] + 0.02  # a straight line at this height would cut through the source bowl's wall
+    assert not path_is_clear(np.stack([low, low + [0.2, 0, 0, 0, 0, 0, 0, 0, 0]]), obstacles[:1], 0.036)
