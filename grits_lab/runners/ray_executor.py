@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import ray
-from ray.exceptions import GetTimeoutError, RayActorError
+from ray.exceptions import GetTimeoutError, RayActorError, RayError
 
 from grits_lab.errors import GritsError
 from grits_lab.runners.base import Executor
@@ -194,6 +194,8 @@ class RayExecutor(Executor):
                     error=f"WorkerLost: worker died on each of {attempt} attempts: {type(exc).__name__}",
                     attempts=attempt,
                 )
+            except RayError as exc:  # e.g. a result that cannot be fetched: record it, go on
+                result = EpisodeResult(episode_id=spec.episode_id, ok=False, error=f"{type(exc).__name__}: {exc}", attempts=attempt)
             result.spec = spec
             result.attempts = attempt
             results.append(result)

@@ -1,0 +1,38 @@
+"""CLI of the data area: bad configs and paths fail with one line naming the problem."""
+
+import pytest
+
+from grits_lab.cli import main
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("kind: demo\n", "`kind` must be one of 'demos', 'spillage'"),
+        ("kind: spillage\ntrials: 10\n", "`trials` must be a multiple of the number of shapes (4)"),
+        ("kind: spillage\nshift: {x: -1}\n", "`shift.x` must be non-negative"),
+        ("kind: demos\nbowl_config: 3\n", "unknown key `bowl_config`"),
+        ("kind: demos\nexecutor: {workers: 0}\n", "`executor.workers` must be at least 1"),
+    ],
+)
+def test_collect_rejects_bad_configs(tmp_path, capsys, text, message):
+    path = tmp_path / "c.yaml"
+    path.write_text(text)
+    assert main(["collect", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+
+
+def test_dataset_info_on_a_non_dataset(tmp_path, capsys):
+    assert main(["dataset", "info", str(tmp_path)]) == 2
+    assert "not a grits-lab dataset" in capsys.readouterr().err
+
+
+def test_output_made_by_another_config_is_refused(tmp_path, capsys):
+    from grits_lab.data.collect import DatasetWriter
+
+    DatasetWriter(tmp_path / "d", "spillage", {"seed": 0})
+    path = tmp_path / "c.yaml"
+    path.write_text(f"kind: spillage\noutput: {tmp_path / 'd'}\n")
+    assert main(["collect", str(path), "--serial"]) == 2
+    assert "made with a different config" in capsys.readouterr().err
