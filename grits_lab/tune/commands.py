@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -29,54 +28,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    import dataclasses
-
-    import optuna
-
-    from grits_lab.errors import InputError, StorageError
-    from grits_lab.io import ensure_writable_dir
+    from grits_lab.errors import InputError
     from grits_lab.tune.config import load_study_config
-    from grits_lab.tune.objective import make_evaluator
-    from grits_lab.tune.outputs import write_outputs
-    from grits_lab.tune.storage import open_storage
-    from grits_lab.tune.study import EVALUATOR_ATTR, open_study, run_trials
+    from grits_lab.tune.job import run_sweep
 
+    if args.n_trials is not None and args.n_trials < 1:
+        raise InputError(f"--n-trials must be >= 1. Got {args.n_trials}.")
     config = load_study_config(args.config)
-    if args.n_trials is not None:
-        if args.n_trials < 1:
-            raise InputError(f"--n-trials must be >= 1. Got {args.n_trials}.")
-        config = dataclasses.replace(config, n_trials=args.n_trials)
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
-    # The evaluator is built before the storage is touched: a missing evaluation layer or
-    # checkpoint fails at once, without leaving an empty study behind.
-    evaluator = None if args.report_only else make_evaluator(config)
-    storage, where = open_storage(args.storage or config.storage, config.out_dir / "journal.log")
-    out_dir = ensure_writable_dir(config.out_dir)
-    if args.report_only:
-        try:
-            study = optuna.load_study(study_name=config.study_name, storage=storage)
-        except KeyError:
-            raise StorageError(f"no study named `{config.study_name}` in {where}") from None
-        from grits_lab.tune.grits_binding import GritsEvaluator
-        from grits_lab.tune.synthetic import SyntheticEvaluator
-
-        kind = study.user_attrs.get(EVALUATOR_ATTR, config.evaluator)
-        label = SyntheticEvaluator.label if kind == "synthetic" else GritsEvaluator.label
-    else:
-        assert evaluator is not None
-        study = open_study(config, storage)
-        label = evaluator.label
-        print(f"sweep {config.study_name}: {label}; storage {where}; "
-              f"{len(config.validation.episodes())} episodes per trial; study budget {config.n_trials} trials",
-              file=sys.stderr)
-        try:
-            run_trials(config, study, storage, evaluator, records_dir=out_dir / "records",
-                       progress=not args.no_progress,
-                       after_trial=lambda st: write_outputs(st, config, out_dir, where, label, plots=False))
-        finally:
-            evaluator.close()
-    summary = write_outputs(study, config, out_dir, where, label, plots=not args.no_plots)
-    _print_summary(summary, out_dir)
+    summary = run_sweep(config, n_trials=args.n_trials, storage=args.storage, report_only=args.report_only,
+                        plots=not args.no_plots, progress=not args.no_progress)
+    _print_summary(summary, config.out_dir)
     return 0
 
 
