@@ -110,3 +110,12 @@ def test_sweep_entry_point_evaluates_the_given_episodes_with_the_given_guidance(
 def test_unknown_method_is_one_clear_error(models, tmp_path):
     with pytest.raises(ConfigError, match="methods"):
         eval_config(models, tmp_path, methods=["grits", "magic"])
+
+
+def test_rule_based_scoops_and_transfers_a_training_food(models, tmp_path):
+    config = eval_config(models, tmp_path, methods=["rule_based"], levels=["high"], scoop={"max_steps": 120})
+    row = evaluate(config, progress=False).iloc[0]
+    assert row["split"] == "train"
+    assert row["scoop_success"] and row["scooped"] >= 1
+    assert row["transferred"] >= 1 and row["target_locate_error_m"] < 0.02
+    assert row["task_success"] == (row["spilled_total"] == 0 and row["transferred"] >= 1)
