@@ -63,13 +63,14 @@ def shift_trajectory(
     center = np.asarray(bowl_center, dtype=np.float64)
 
     def violation(traj: np.ndarray) -> np.ndarray:
+        """(T, 2): how far each waypoint is outside the wall margin and below the floor margin (<= 0: fine)."""
         rel = traj[:, :3] - center
-        inside = rel[:, 2] < rim_height
+        inside = (rel[:, 2] < rim_height)[:, None]
         radial = np.linalg.norm(rel[:, :2], axis=1) - (inner_radius_at(rel[:, 2]) - clearance)
         below = (floor_height + 0.005) - rel[:, 2]
-        return np.where(inside, np.maximum(radial, below), -np.inf)
+        return np.where(inside, np.stack([radial, below], axis=1), -np.inf)
 
-    allowed = np.maximum(violation(base), 0.0) + 1e-9
+    allowed = np.maximum(violation(base), 0.0) + 1e-9  # per waypoint and per constraint
 
     def shifted(scale: float) -> np.ndarray:
         out = base.copy()

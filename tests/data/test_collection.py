@@ -42,7 +42,8 @@ def test_shifts_keep_the_spoon_inside_the_bowl():
         base_rel = base[:, :3] - center
         base_excess = np.max(np.linalg.norm(base_rel[:, :2], axis=1) - (bowl.inner_radius_at(base_rel[:, 2]) - 0.02))
         assert np.all(radial - (bowl.inner_radius_at(rel[inside, 2]) - 0.02) <= max(base_excess, 0) + 1e-6)
-        assert np.all(rel[inside, 2] >= bowl.floor_thickness + 0.005 - 1e-6) or scale == 0.0
+        base_below = max(0.0, bowl.floor_thickness + 0.005 - base_rel[:, 2].min())
+        assert np.all(rel[inside, 2] >= bowl.floor_thickness + 0.005 - base_below - 1e-6)
         assert 0.0 <= scale <= 1.0
     # an upward shift is always feasible and applied in full
     _, scale = shift_trajectory(base, np.array([0.0, 0.0, 0.05]), center, bowl.inner_radius_at, bowl.depth, bowl.floor_thickness)
