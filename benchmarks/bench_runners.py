@@ -6,6 +6,9 @@ one JSON object:
 
     episodes_per_min_bare, episodes_per_min_1, episodes_per_min_2, scaling_2_vs_1,
     overhead_1_worker = (wall with 1 worker - bare wall) / bare wall,
+    engine_overhead_N = (N x job wall - time inside the work function) / that time, i.e. what the
+        engine adds per episode (dispatch, result transfer, idle workers), independent of how fast
+        the machine happens to be during the run,
     peak_rss_mb_per_worker, ...
 
 Usage: python benchmarks/bench_runners.py [--episodes 8] [--config experiments/spillage_quick.yaml]
@@ -67,6 +70,9 @@ def main() -> None:
             t0 = time.perf_counter()
             results = list(ex.map_unordered(specs))
             out[workers] = time.perf_counter() - t0
+            # Time spent inside the work function, measured in the worker: what remains of the
+            # job's wall time (x workers) is dispatch, transfer and idle workers.
+            out[f"work_{workers}"] = sum(r.wall_time_s for r in results)
             rss = ex.worker_peak_rss_mb()
         assert all(r.ok for r in results)
         same = {r.episode_id: r.payload["meta"]["label"] for r in results} == {r.episode_id: r.payload["meta"]["label"] for r in bare}
@@ -84,6 +90,9 @@ def main() -> None:
         "episodes_per_min_2": round(60 * n / out[2], 2),
         "scaling_2_vs_1": round(out[1] / out[2], 3),
         "overhead_1_worker": round((out[1] - bare_wall) / bare_wall, 4),
+        "engine_overhead_1_worker": round((out[1] - out["work_1"]) / out["work_1"], 4),
+        "engine_overhead_2_workers": round((2 * out[2] - out["work_2"]) / out["work_2"], 4),
+        "load_average_1min": round(os.getloadavg()[0], 2),
         "peak_rss_mb_per_worker": round(max(out["rss_1"] + out["rss_2"]), 1),
         "labels_match_bare": bool(out["same_1"] and out["same_2"]),
     }

@@ -31,6 +31,24 @@ from grits_lab.errors import StorageError
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
 
 FAILURE_DIR = "failures"
+# The code that determines episode contents: a dataset resumed after it changed mixes two versions.
+_DATA_CODE = ("sim", "perception", "data")
+
+
+def data_code_hash() -> str:
+    """Short hash of the simulator, perception and data sources (and packaged YAML) of this install."""
+    import hashlib
+
+    import grits_lab
+
+    root = Path(grits_lab.__file__).parent
+    digest = hashlib.sha256()
+    for package in _DATA_CODE:
+        for path in sorted((root / package).rglob("*")):
+            if path.suffix in (".py", ".yaml") and path.is_file():
+                digest.update(str(path.relative_to(root)).encode())
+                digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
 
 
 class DatasetWriter:
@@ -56,12 +74,23 @@ class DatasetWriter:
                     f"(fingerprint {manifest.get('fingerprint')} vs {self.fingerprint}); choose another output or remove it"
                 )
             self.manifest = manifest
+            code = data_code_hash()
+            if manifest.get("code_hash") not in (None, code):
+                import sys
+
+                print(
+                    f"warning: the simulator/perception/data code changed since {self.out_dir} was started "
+                    f"(code {manifest.get('code_hash')} -> {code}); resuming mixes episodes of both versions. "
+                    "Remove the directory to regenerate it.",
+                    file=sys.stderr,
+                )
         else:
             self.manifest = {
                 "format_version": FORMAT_VERSION,
                 "kind": kind,
                 "fingerprint": self.fingerprint,
                 "config": config_to_dict(identity),
+                "code_hash": data_code_hash(),
                 "status": "in_progress",
             }
             self._write_manifest()

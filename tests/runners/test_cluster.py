@@ -76,3 +76,25 @@ print(json.dumps({"workers": n, "same": res == ref, "nodes": nodes, "count": len
 
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out == {"workers": 2, "same": True, "nodes": 1, "count": 6}
+
+
+def test_collection_runs_unchanged_on_the_cluster(ray_head, tmp_path):
+    """`grits-lab collect` with `executor.address:` set, as a cluster user runs it."""
+    import json
+
+    import yaml
+
+    config = {
+        "kind": "spillage", "output": str(tmp_path / "spill"), "trials": 2, "spill_fraction": 0.0, "shapes": ["sphere"],
+        "particles": {"layers": [1, 1]}, "cloud": {"n_points": 64, "cad_surface_samples": 500},
+        "sim": {"cameras": [{"name": "front", "eye": [1.05, -0.15, 0.55], "target": [0.5, -0.1, 0.03], "width": 64, "height": 48}]},
+        "executor": {"address": ray_head},
+    }
+    path = tmp_path / "cluster.yaml"
+    path.write_text(yaml.safe_dump(config))
+    env = dict(os.environ, RAY_AUTH_MODE="token", RAY_USAGE_STATS_ENABLED="0")
+    proc = subprocess.run(["grits-lab", "collect", str(path), "--no-progress"], env=env, capture_output=True, text=True, timeout=400)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    summary = json.loads(proc.stdout[proc.stdout.index("{"):])
+    assert summary["trials"] == 2 and summary["buckets"] == {"sphere/0": 2, "sphere/1": 0}
+    assert len(list((tmp_path / "spill" / "episodes").glob("*.npz"))) == 2
