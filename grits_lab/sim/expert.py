@@ -28,8 +28,8 @@ class Keyframe:
 
 # Forward is +x of the world (away from the robot); the scoop runs from the near to the far side.
 KEYFRAMES = (
-    Keyframe(1.5, (-0.036, 0.0, 0.05), 35.0, above_rim=True),
-    Keyframe(2.5, (-0.038, 0.0, 0.016), 25.0),
+    Keyframe(1.5, (-0.026, 0.0, 0.05), 35.0, above_rim=True),
+    Keyframe(2.5, (-0.026, 0.0, 0.016), 25.0),
     Keyframe(3.6, (-0.008, 0.0, 0.007), 14.0),
     Keyframe(4.4, (0.010, 0.0, 0.004), 4.0),
     Keyframe(5.1, (0.012, 0.0, 0.011), -14.0),

@@ -68,11 +68,11 @@ TARGET_BOWL = BowlGeometry(floor_radius=0.038, rim_radius=0.058, depth=0.045, se
 class SpoonGeometry:
     """A spoon with an elliptical, concave bowl (about 4 x 6 cm) and a straight handle."""
 
-    half_length: float = 0.030  # inner semi-axis along x (6 cm long)
-    half_width: float = 0.020  # inner semi-axis along y (4 cm wide)
-    wall_height: float = 0.010  # slant length of the bowl's rim wall at the back and sides
+    half_length: float = 0.025  # inner floor semi-axis along x (with the rim: about 6 cm long)
+    half_width: float = 0.016  # inner floor semi-axis along y (with the rim: about 4 cm wide)
+    wall_height: float = 0.014  # slant length of the bowl's rim wall at the back and sides
     lip_height: float = 0.0  # slant length at the tip: no lip, so the thin edge slides under food
-    wall_slant_deg: float = 50.0  # rim wall leaning outwards from the normal (a low, open lip)
+    wall_slant_deg: float = 45.0  # rim wall leaning outwards from the normal (a low, open lip)
     thickness: float = 0.002
     segments: int = 10  # with 5 floor strips and the handle: 16 boxes, one PyBullet compound
     handle_length: float = 0.12

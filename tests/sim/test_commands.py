@@ -1,0 +1,92 @@
+"""`grits-lab rollout / scene / foods`: JSON output and one-line errors with exit code 2 on bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from grits_lab.cli import main
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def assert_one_line_error(code, err, *needles):
+    assert code == 2
+    lines = [ln for ln in err.strip().splitlines() if not ln.startswith("pybullet build time")]
+    assert len(lines) == 1 and lines[0].startswith("grits-lab: error:"), err
+    for needle in needles:
+        assert needle in lines[0]
+
+
+def test_foods_json_lists_all_foods(capsys):
+    code, out, _ = run(capsys, "foods", "--json")
+    data = json.loads(out)
+    assert code == 0 and len(data["foods"]) == 16
+    orange = next(f for f in data["foods"] if f["food"] == "orange")
+    assert orange["split"] == "train" and len(orange["levels"]) == 1
+
+
+def test_scene_json_has_the_geometry(capsys):
+    code, out, _ = run(capsys, "scene", "--seed", "4", "--json")
+    scene = json.loads(out)
+    assert code == 0 and scene["seed"] == 4
+    assert scene["source_bowl_rim_height"] == pytest.approx(0.065) and len(scene["cameras"]) == 2
+    assert len(scene["target_bowl_position"]) == 3 and "bowl_length" in scene["spoon"]
+
+
+@pytest.mark.parametrize("argv, needles", [
+    (["--food", "pizza", "--quantity", "low"], ["unknown food", "pizza"]),
+    (["--food", "orange", "--quantity", "low"], ["quantity level", "low"]),
+])
+def test_unknown_food_or_level(capsys, argv, needles):
+    code, _, err = run(capsys, "rollout", *argv, "--seed", "0", "--expert")
+    assert_one_line_error(code, err, *needles)
+
+
+@pytest.mark.parametrize("array, needle", [
+    (np.zeros((10, 5)), "shape"),
+    (np.zeros(9), "shape"),
+    (np.full((4, 9), np.nan), "NaN"),
+])
+def test_bad_trajectories(capsys, tmp_path, array, needle):
+    path = tmp_path / "traj.npy"
+    np.save(path, array)
+    code, _, err = run(capsys, "rollout", "--food", "orange", "--quantity", "medium", "--seed", "0", "--trajectory", str(path))
+    assert_one_line_error(code, err, needle)
+
+
+def test_missing_trajectory_file(capsys, tmp_path):
+    code, _, err = run(capsys, "rollout", "--food", "orange", "--quantity", "medium", "--seed", "0", "--trajectory", str(tmp_path / "no.npy"))
+    assert_one_line_error(code, err, "not found")
+
+
+def test_food_file_with_negative_mass(capsys, tmp_path):
+    path = tmp_path / "foods.yaml"
+    path.write_text("foods:\n  peas:\n    split: train\n    levels: {low: 5}\n    components:\n"
+                    "      - {shape: sphere, radius: [0.004, 0.005], mass: [-0.001, 0.001]}\n")
+    code, _, err = run(capsys, "foods", "--foods-file", str(path))
+    assert_one_line_error(code, err, "peas", "mass")
+    code, _, err = run(capsys, "rollout", "--food", "peas", "--quantity", "low", "--seed", "0", "--expert", "--foods-file", str(path))
+    assert_one_line_error(code, err, "peas", "mass")
+
+
+def test_rollout_of_a_quaternion_trajectory_prints_one_json_record(capsys, tmp_path):
+    # Hold the spoon near its home pose for 1 s, as (T, 7) xyz + quaternion.
+    traj = np.tile(np.array([0.5, 0.0, 0.22, 0.0, 0.0, 0.0, 1.0]), (10, 1))
+    path, saved = tmp_path / "hold.npy", tmp_path / "played.npy"
+    np.save(path, traj)
+    code, out, _ = run(capsys, "rollout", "--food", "orange", "--quantity", "medium", "--seed", "2",
+                       "--trajectory", str(path), "--json", "--save-trajectory", str(saved))
+    assert code == 0
+    record = json.loads(out)
+    for key in ("food", "quantity", "seed", "n_particles", "spilled", "scooped", "spoon_coverage", "spillage",
+                "scoop_failure", "scoop_success", "ik_failures"):
+        assert key in record
+    assert record["scoop_failure"] and record["spilled"] == 0 and record["n_particles"] == 10
+    assert np.load(saved).shape == (10, 9)

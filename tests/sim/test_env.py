@@ -1,0 +1,183 @@
+"""The scooping world's behaviour: determinism, settling, scooping, spilling, cameras, IK failures."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from grits_lab.errors import InputError
+from grits_lab.sim import ScoopEnv, expert_trajectory, nominal_expert_trajectory, play_trajectory, run_episode
+from grits_lab.sim.env import matrix_to_pose9
+from grits_lab.sim.expert import spoon_orientation
+from grits_lab.sim.foods import load_foods
+
+ALL_FOODS = load_foods().names()
+
+
+@pytest.fixture(scope="module")
+def env():
+    e = ScoopEnv()
+    yield e
+    e.close()
+
+
+def hover_outside(env: ScoopEnv, steps: int) -> np.ndarray:
+    """A trajectory that keeps the spoon above the table beside the source bowl, never entering it."""
+    home = np.array(env.scene().spoon_home)
+    goal = home.copy()
+    goal[:3] = [0.45, -0.05, 0.12]
+    return np.linspace(home, goal, steps)
+
+
+def test_same_seed_gives_an_identical_episode(env):
+    traj = None
+    records, observations = [], []
+    for _ in range(2):
+        env.reset(seed=11, options={"food": "soybeans", "n_particles": 40})
+        traj = nominal_expert_trajectory(env.scene())[:30] if traj is None else traj
+        obs_seen = []
+        record = play_trajectory(env, traj, on_step=lambda t, e, obs: obs_seen.append(obs["ee_pose"].copy()))
+        records.append(record.to_dict())
+        observations.append(np.array(obs_seen))
+        positions = env.particle_positions()
+        observations[-1] = (observations[-1], positions)
+    for r in records:
+        r.pop("wall_time_s")
+    assert records[0] == records[1]
+    assert np.array_equal(observations[0][0], observations[1][0])
+    assert np.array_equal(observations[0][1], observations[1][1])
+
+
+def test_a_different_seed_gives_a_different_world(env):
+    env.reset(seed=1, options={"food": "soybeans", "n_particles": 30})
+    a = env.particle_positions(), env.target_bowl_pose()
+    env.reset(seed=2, options={"food": "soybeans", "n_particles": 30})
+    b = env.particle_positions(), env.target_bowl_pose()
+    assert not np.allclose(a[0], b[0]) and not np.allclose(a[1], b[1])
+
+
+@pytest.mark.parametrize("food", ALL_FOODS)
+def test_every_food_settles_without_spilling_while_the_spoon_waits(env, food):
+    level = list(env.foods.get(food).levels)[-1]  # the largest quantity: the hardest to hold
+    env.reset(seed=5, options={"food": food, "level": level})
+    record = play_trajectory(env, hover_outside(env, 5))
+    assert record.spilled == 0 and record.scooped == 0 and record.n_particles == env.foods.get(food).levels[level]
+    # Every particle rests inside the bowl, below its rim, slower than 5 cm/s.
+    pos = env.particle_positions() - env.source_bowl_pose()[:3, 3]
+    assert np.linalg.norm(pos[:, :2], axis=1).max() < env.world.source_geometry.rim_radius
+    assert pos[:, 2].min() > env.world.source_geometry.floor_thickness and pos[:, 2].max() < env.world.source_geometry.depth
+    assert env.world.particle_speeds().max() < 0.05
+
+
+@pytest.fixture(scope="module")
+def scooped(env):
+    """soybeans, low: the randomized expert scoop; the env is left holding the loaded spoon."""
+    record, traj = run_episode(env, "soybeans", "low", seed=0)
+    return record, traj
+
+
+def test_expert_scoops_without_spilling(scooped):
+    record, traj = scooped
+    assert record.scoop_success and not record.spillage and record.ik_failures == 0
+    assert record.scooped >= 10 and record.spoon_coverage >= 1 / 3
+    assert record.spilled_over_time == [0] * len(traj)
+
+
+def test_particles_neither_pass_through_nor_jitter_out_of_a_held_spoon(env, scooped):
+    before = env.metrics()["scooped"]
+    held = matrix_to_pose9(env.spoon_pose())
+    for _ in range(10):  # hold still for 1 s
+        env.step(held)
+    assert env.metrics()["scooped"] == before
+
+
+def test_tipping_the_loaded_spoon_over_the_table_spills(env, scooped):
+    record, traj = scooped
+    start = matrix_to_pose9(env.spoon_pose())
+    over_table = start.copy()
+    over_table[:3] = [0.45, -0.22, 0.16]
+    tipped = over_table.copy()
+    tipped[3:] = matrix_to_pose9(np.block([[spoon_orientation(0, 0) @ np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]]), np.zeros((3, 1))], [np.zeros((1, 3)), np.ones((1, 1))]]))[3:]
+    path = np.concatenate([np.linspace(start, over_table, 15), np.linspace(over_table, tipped, 10), np.repeat(tipped[None], 10, 0)])
+    rec = play_trajectory(env, path)
+    assert rec.spillage and rec.spilled >= record.scooped // 2
+    assert rec.first_spill_step > len(traj)  # nothing spilled during the scoop itself
+    assert rec.spilled_over_time == sorted(rec.spilled_over_time)
+
+
+def test_a_trajectory_that_never_enters_the_bowl_is_a_scoop_failure(env):
+    env.reset(seed=3, options={"food": "mung_beans", "level": "low"})
+    record = play_trajectory(env, hover_outside(env, 20))
+    assert record.scoop_failure and not record.scoop_success and record.scooped == 0 and record.spilled == 0
+
+
+@pytest.mark.parametrize("food", ["chocolate_balls", "dried_jujube", "orange"])
+def test_expert_lifts_training_foods_without_spilling(env, food):
+    level = list(env.foods.get(food).levels)[0]
+    record, _ = run_episode(env, food, level, seed=1)
+    assert record.scoop_success and not record.spillage, record.summary()
+
+
+@pytest.mark.slow
+def test_expert_succeeds_on_most_training_episodes(env):
+    outcomes = []
+    for food in env.foods.names("train"):
+        for level in env.foods.get(food).levels:
+            for seed in range(3):
+                record, _ = run_episode(env, food, level, seed=seed)
+                outcomes.append(record.scoop_success and not record.spillage)
+    assert np.mean(outcomes) >= 0.7, np.mean(outcomes)
+
+
+def test_expert_is_seeded_and_stays_near_the_nominal_scoop(env):
+    env.reset(seed=0, options={"food": "orange"})
+    scene = env.scene()
+    a = expert_trajectory(scene, np.random.default_rng(4))
+    b = expert_trajectory(scene, np.random.default_rng(4))
+    c = expert_trajectory(scene, np.random.default_rng(5))
+    nominal = nominal_expert_trajectory(scene)
+    assert np.array_equal(a, b) and not np.array_equal(a, c)
+    assert a.shape[1] == 9 and abs(len(a) - len(nominal)) <= 12
+    lowest = a[np.argmin(a[:, 2])]
+    assert np.linalg.norm(lowest[:2] - np.array(scene.source_bowl_center[:2])) < scene.source_bowl_floor_radius
+
+
+def test_cameras_see_the_particles_where_they_are(env):
+    env.reset(seed=2, options={"food": "soybeans", "level": "low"})
+    food_ids = set(env.segmentation_ids()["food"])
+    positions = env.particle_positions()
+    seen = 0
+    for image in env.render_cameras().values():
+        assert image.rgb.shape == (image.segmentation.shape + (3,)) and image.rgb.dtype == np.uint8
+        mask = np.isin(image.segmentation, list(food_ids))
+        assert mask.sum() > 50
+        v, u = np.nonzero(mask)
+        z = image.depth[v, u].astype(np.float64)
+        k = image.intrinsics
+        cam = np.stack([(u - k[0, 2]) * z / k[0, 0], (v - k[1, 2]) * z / k[1, 1], z, np.ones_like(z)])
+        world = (image.camera_to_world @ cam)[:3].T
+        nearest = np.min(np.linalg.norm(world[:, None, :] - positions[None, :, :], axis=2), axis=1)
+        assert np.median(nearest) < 0.006  # surface points lie within a particle radius of a centre
+        seen += 1
+    assert seen == len(env.config.cameras)
+
+
+def test_unreachable_poses_are_counted_not_fatal(env):
+    env.reset(seed=0, options={"food": "orange"})
+    far = np.array(env.scene().spoon_home)
+    far[:3] = [1.6, 0.0, 0.3]
+    _, _, _, _, info = env.step(far)
+    assert info["ik_failure"] and info["ik_failures"] == 1
+    assert env.metrics()["ik_failures"] == 1
+
+
+def test_bad_actions_and_options_are_input_errors(env):
+    env.reset(seed=0, options={"food": "orange"})
+    with pytest.raises(InputError):
+        env.step(np.zeros(7))
+    with pytest.raises(InputError):
+        env.step(np.full(9, np.nan))
+    with pytest.raises(InputError, match="unknown food"):
+        env.reset(seed=0, options={"food": "pizza"})
+    with pytest.raises(InputError, match="level"):
+        env.reset(seed=0, options={"food": "orange", "level": "huge"})

@@ -1,0 +1,81 @@
+"""Bowl and spoon geometry: really concave, closed (no seams a particle fits through), meshes up to date."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pybullet as pb
+import pytest
+
+from grits_lab.sim.shapes import TARGET_BOWL, BowlGeometry, SpoonGeometry, bowl_boxes, boxes_to_mesh, spoon_boxes
+from grits_lab.sim.world import MAX_SHAPES_PER_LINK, _compound, connect_direct, create_static_boxes
+
+ASSETS = Path(__file__).resolve().parents[2] / "assets"
+
+
+@pytest.fixture(scope="module")
+def client():
+    c = connect_direct()
+    yield c
+    c.disconnect()
+
+
+@pytest.mark.parametrize("geometry", [BowlGeometry(), TARGET_BOWL], ids=["source", "target"])
+def test_bowl_is_closed_and_concave(client, geometry):
+    client.resetSimulation()
+    create_static_boxes(client, bowl_boxes(geometry), np.zeros(3), (1, 1, 1, 1))
+    # Horizontal rays from the axis outwards, every 2 degrees at many heights, all hit the wall...
+    starts, ends = [], []
+    for z in np.linspace(geometry.floor_thickness + 0.002, geometry.depth - 0.002, 15):
+        for th in np.linspace(0, 2 * math.pi, 180, endpoint=False):
+            starts.append([0, 0, z])
+            ends.append([0.3 * math.cos(th), 0.3 * math.sin(th), z])
+    hits = client.rayTestBatch(starts, ends)
+    assert all(h[0] >= 0 for h in hits)
+    radial = np.array([np.linalg.norm(h[3][:2]) for h in hits])
+    assert radial.max() <= geometry.rim_radius + 1e-3 and radial.min() >= geometry.floor_radius - 1e-3
+    # ...and vertical rays inside the floor radius land on the floor.
+    grid = [(x, y) for x in np.linspace(-1, 1, 15) for y in np.linspace(-1, 1, 15) if x * x + y * y <= 1]
+    r = geometry.floor_radius
+    hits = client.rayTestBatch([[r * x, r * y, 0.2] for x, y in grid], [[r * x, r * y, -0.1] for x, y in grid])
+    assert all(h[0] >= 0 and abs(h[3][2] - geometry.floor_thickness) < 1e-4 for h in hits)
+
+
+def test_source_bowl_dimensions_match_the_paper():
+    g = BowlGeometry()
+    assert 0.16 <= 2 * g.outer_radius <= 0.18 and g.depth == pytest.approx(0.065)
+
+
+def test_spoon_is_one_compound_with_a_concave_bowl(client):
+    g = SpoonGeometry()
+    boxes = spoon_boxes(g)
+    assert len(boxes) <= MAX_SHAPES_PER_LINK
+    bowl_vertices, _ = boxes_to_mesh(boxes[:-1])  # the last box is the handle
+    length, width = np.ptp(bowl_vertices[:, 0]), np.ptp(bowl_vertices[:, 1])
+    assert 0.05 <= length <= 0.07 and 0.035 <= width <= 0.055, (length, width)  # about 4 x 6 cm
+    client.resetSimulation()
+    col, vis = _compound(client, boxes)
+    client.createMultiBody(0, col, vis)
+    # Rays from the centre towards the sides and the back hit the rim above the floor: it holds food.
+    starts = [[0, 0, 0.003]] * 3
+    ends = [[0, 0.06, 0.003], [0, -0.06, 0.003], [-0.07, 0, 0.003]]
+    hits = client.rayTestBatch(starts, ends)
+    assert all(h[0] >= 0 for h in hits)
+    assert abs(hits[0][3][1]) < g.half_width + 0.006 and abs(hits[2][3][0]) < g.half_length + 0.008
+    # The floor lies under the whole bowl ellipse.
+    down = client.rayTestBatch([[0.9 * g.half_length * c, 0.9 * g.half_width * s, 0.05] for c, s in ((1, 0), (0, 1), (-0.7, 0.7), (0, 0))],
+                               [[0.9 * g.half_length * c, 0.9 * g.half_width * s, -0.05] for c, s in ((1, 0), (0, 1), (-0.7, 0.7), (0, 0))])
+    assert all(h[0] >= 0 and abs(h[3][2]) < 1e-4 for h in down)
+
+
+@pytest.mark.parametrize("name, boxes", [("spoon.obj", spoon_boxes(SpoonGeometry())), ("source_bowl.obj", bowl_boxes(BowlGeometry())),
+                                         ("target_bowl.obj", bowl_boxes(TARGET_BOWL))])
+def test_asset_meshes_match_the_simulated_geometry(name, boxes):
+    vertices, faces = boxes_to_mesh(boxes)
+    lines = (ASSETS / name).read_text().splitlines()
+    stored_v = np.array([[float(x) for x in ln.split()[1:]] for ln in lines if ln.startswith("v ")])
+    stored_f = np.array([[int(x) - 1 for x in ln.split()[1:]] for ln in lines if ln.startswith("f ")])
+    assert stored_v.shape == vertices.shape, "regenerate with `python assets/make_assets.py`"
+    assert np.allclose(stored_v, vertices, atol=2e-6) and np.array_equal(stored_f, faces)
