@@ -17,6 +17,7 @@ from grits_lab.errors import GritsError
 
 # Modules that register top-level subcommands.
 COMMAND_MODULES = [
+    "grits_lab.pipeline.commands",
     "grits_lab.data.commands",
     "grits_lab.sim.commands",
     "grits_lab.tune.commands",

@@ -6,6 +6,7 @@ from grits_lab.config.loading import (
     config_to_dict,
     load_config,
     load_yaml,
+    merge_mappings,
     require,
 )
 
@@ -15,5 +16,6 @@ __all__ = [
     "config_to_dict",
     "load_config",
     "load_yaml",
+    "merge_mappings",
     "require",
 ]

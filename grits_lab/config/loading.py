@@ -140,6 +140,17 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
     return value
 
 
+def merge_mappings(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    """Recursive merge for config overrides: mappings merge key by key, anything else is replaced."""
+    out = dict(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = merge_mappings(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
 def config_to_dict(config: Any) -> Any:
     """Plain-YAML form of a config (dataclasses to dicts, tuples to lists)."""
     if dataclasses.is_dataclass(config):

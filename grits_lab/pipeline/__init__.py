@@ -1,0 +1,1 @@
+"""The one-command pipeline: collect -> train -> evaluate -> sweep -> report, resumable stage by stage."""

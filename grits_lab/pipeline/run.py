@@ -1,0 +1,102 @@
+"""Run the pipeline's stages in order, skipping each stage whose outputs match its current config.
+
+A stage's fingerprint hashes its wired config file together with the fingerprints of the stages
+it reads from, so changing the demonstrations re-trains the policy but leaves the predictor
+alone. The state of finished stages lives in `<output_dir>/pipeline_state.json`, written
+atomically after each stage; a stage interrupted half-way is simply run again and resumes
+through its own resume logic (collections skip finished episodes, trainers load `last.pt`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from grits_lab.config import load_yaml, merge_mappings
+from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
+from grits_lab.pipeline.config import UPSTREAM, PipelineConfig
+from grits_lab.pipeline.stages import Layout, run, wire
+
+STATE_FILE = "pipeline_state.json"
+
+
+def stage_config_text(stage: str, config: PipelineConfig, layout: Layout) -> str:
+    """The YAML a stage runs with: its file, the user's overrides, then the pipeline's links."""
+    spec = config.stages[stage]
+    data = load_yaml(spec.config) if spec.config else {}
+    data = merge_mappings(data, spec.overrides)
+    data = wire(stage, data, layout, set(config.stages), config.workers, config.address)
+    header = f"# {stage} stage of pipeline `{config.name}`, generated from {spec.config or 'defaults'}\n"
+    return header + yaml.safe_dump(data, sort_keys=False)
+
+
+def fingerprint(text: str, upstream: list[str]) -> str:
+    return hashlib.sha256((text + "|" + "|".join(upstream)).encode()).hexdigest()[:16]
+
+
+def load_state(root: Path) -> dict[str, Any]:
+    path = root / STATE_FILE
+    if not path.exists():
+        return {}
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError:
+        print(f"warning: {path} is damaged; every stage will be checked again", file=sys.stderr)
+        return {}
+
+
+def run_pipeline(config: PipelineConfig, only: list[str] | None = None, force: list[str] | None = None,
+                 progress: bool = True) -> dict[str, Any]:
+    """Run (or resume) every configured stage; returns {stage: {status, seconds, fingerprint, summary}}."""
+    layout = Layout(ensure_writable_dir(config.output_dir))
+    ensure_writable_dir(layout.configs)
+    state = load_state(layout.root)
+    fingerprints: dict[str, str] = {}
+    results: dict[str, Any] = {}
+    stages = config.ordered_stages()
+    for index, stage in enumerate(stages, start=1):
+        text = stage_config_text(stage, config, layout)
+        upstream = [fingerprints[s] for s in UPSTREAM.get(stage, ()) if s in fingerprints]
+        fp = fingerprint(text, upstream)
+        fingerprints[stage] = fp
+        previous = state.get(stage, {})
+        if only and stage not in only:
+            results[stage] = {"status": "not selected", "fingerprint": fp}
+            continue
+        if previous.get("fingerprint") == fp and previous.get("status") == "done" and stage not in (force or []):
+            print(f"[{index}/{len(stages)}] {stage}: up to date, skipped", file=sys.stderr)
+            results[stage] = {**previous, "status": "skipped"}
+            continue
+        if previous.get("fingerprint") not in (None, fp):
+            # the config changed: the stage's old outputs would be resumed under the wrong config
+            for path in layout.stage_outputs(stage):
+                if path.is_dir():
+                    shutil.rmtree(path)
+                elif path.exists():
+                    path.unlink()
+            print(f"[{index}/{len(stages)}] {stage}: config changed, previous outputs removed", file=sys.stderr)
+        config_path = layout.configs / f"{stage}.yaml"
+        write_text_atomic(config_path, text)
+        print(f"[{index}/{len(stages)}] {stage}: running ({config_path})", file=sys.stderr)
+        state[stage] = {"status": "running", "fingerprint": fp}
+        write_json_atomic(layout.root / STATE_FILE, state)
+        start = time.perf_counter()
+        summary = run(stage, config_path, layout, progress)
+        seconds = round(time.perf_counter() - start, 1)
+        state[stage] = {"status": "done", "fingerprint": fp, "seconds": seconds,
+                        "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "summary": _jsonable(summary)}
+        write_json_atomic(layout.root / STATE_FILE, state)
+        results[stage] = state[stage]
+        print(f"[{index}/{len(stages)}] {stage}: done in {seconds:.0f} s", file=sys.stderr)
+    return results
+
+
+def _jsonable(value: Any) -> Any:
+    return json.loads(json.dumps(value, default=str))

@@ -1,0 +1,205 @@
+"""Each pipeline stage: how its config is wired to the pipeline's layout, and how it runs.
+
+`wire_<stage>` takes the stage YAML (as a mapping, user overrides already merged) and sets the
+keys that connect stages: output locations, the datasets a trainer reads, the checkpoints an
+evaluation loads. `run_<stage>` runs the stage from its wired YAML file through the same loader
+and entry point the stage's own command uses, so a pipeline stage is exactly the job a user
+would get from `grits-lab collect/train/evaluate/sweep/report` with that file.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from grits_lab.config import merge_mappings
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where every stage of one pipeline run writes, under `root`."""
+
+    root: Path
+
+    @property
+    def configs(self) -> Path:
+        return self.root / "configs"
+
+    def dataset(self, stage: str) -> Path:
+        return self.root / "datasets" / stage
+
+    @property
+    def policy_dir(self) -> Path:
+        return self.root / "policy"
+
+    @property
+    def bc_dir(self) -> Path:
+        return self.root / "bc"
+
+    @property
+    def predictor_root(self) -> Path:
+        return self.root / "predictor"
+
+    def predictor_dir(self, stage: str) -> Path:
+        return self.predictor_root / stage
+
+    @property
+    def evaluate_dir(self) -> Path:
+        return self.root / "evaluate"
+
+    @property
+    def report_dir(self) -> Path:
+        return self.root / "report"
+
+    def stage_outputs(self, stage: str) -> list[Path]:
+        """What a stage owns: removed before the stage re-runs under a changed config."""
+        return {
+            "demos": [self.dataset("demos")],
+            "spillage": [self.dataset("spillage")],
+            "spillage_heldout": [self.dataset("spillage_heldout")],
+            "policy": [self.policy_dir],
+            "bc": [self.bc_dir],
+            "predictor": [self.predictor_dir("predictor")],
+            "predictor_raw": [self.predictor_dir("predictor_raw")],
+            "predictor_pointnet2": [self.predictor_dir("predictor_pointnet2")],
+            "evaluate": [self.evaluate_dir / "episodes.parquet", self.evaluate_dir / "records"],
+            "sweep": [self.evaluate_dir / "sweep"],
+            "report": [self.report_dir],
+        }[stage]
+
+
+def policy_checkpoint(layout: Layout) -> Path:
+    return layout.policy_dir / "checkpoints" / "last.pt"
+
+
+def bc_checkpoint(layout: Layout) -> Path:
+    return layout.bc_dir / "checkpoints" / "last.pt"
+
+
+def predictor_checkpoint(layout: Layout, stage: str) -> Path:
+    return layout.predictor_dir(stage) / "best.pt"
+
+
+def _executor(data: dict[str, Any], workers: int | None, address: str | None) -> dict[str, Any]:
+    executor = dict(data.get("executor") or {})
+    if workers is not None:
+        executor["workers"] = workers
+    if address is not None:
+        executor["address"] = address
+    return {**data, "executor": executor} if executor else data
+
+
+def wire(stage: str, data: dict[str, Any], layout: Layout, present: set[str],
+         workers: int | None, address: str | None) -> dict[str, Any]:
+    """The stage's config mapping with the pipeline's links set. `present`: configured stages."""
+    if stage in ("demos", "spillage", "spillage_heldout"):
+        data = {**data, "output": str(layout.dataset(stage))}
+        if stage != "demos" and "demos" in present:
+            # the spillage trajectories are shifts of the mean demonstration (SPEC)
+            data["base_trajectory"] = str(layout.dataset("demos"))
+        return _executor(data, workers, address)
+    if stage == "policy":
+        return {**data, "dataset": str(layout.dataset("demos")), "output_dir": str(layout.policy_dir)}
+    if stage == "bc":
+        return {**data, "dataset": str(layout.dataset("demos")), "output_dir": str(layout.bc_dir)}
+    if stage.startswith("predictor"):
+        data = merge_mappings(data, {"data": {"dataset": str(layout.dataset("spillage"))}})
+        return {**data, "name": stage, "output_dir": str(layout.predictor_root)}
+    if stage == "evaluate":
+        checkpoints: dict[str, str | None] = {
+            "policy": str(policy_checkpoint(layout)) if "policy" in present else None,
+            "bc": str(bc_checkpoint(layout)) if "bc" in present else None,
+            "demos": str(layout.dataset("demos")) if "demos" in present else None,
+        }
+        for name in ("predictor", "predictor_raw", "predictor_pointnet2"):
+            checkpoints[name] = str(predictor_checkpoint(layout, name)) if name in present else None
+        data = merge_mappings(data, {"checkpoints": checkpoints})
+        data = {**data, "output_dir": str(layout.evaluate_dir)}
+        return _executor(data, workers, address)
+    if stage == "sweep":
+        evaluation = {
+            "config": str(layout.configs / "evaluate.yaml"),
+            "checkpoints": [str(policy_checkpoint(layout)), str(predictor_checkpoint(layout, "predictor"))],
+            "method": "grits",
+        }
+        return {**data, "study_name": "sweep", "results_dir": str(layout.evaluate_dir), "evaluation": evaluation}
+    if stage == "report":
+        return {**data, "run_dir": str(layout.evaluate_dir), "out": str(layout.report_dir)}
+    raise ValueError(f"unknown stage {stage}")
+
+
+def run(stage: str, config_path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
+    """Run one wired stage; returns a JSON-serializable summary."""
+    return _RUNNERS[stage.split("_")[0] if stage.startswith("predictor") else stage](stage, config_path, layout, progress)
+
+
+def _run_collect(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
+    from grits_lab.data.jobs import load_collect_config, run_collection
+
+    return run_collection(load_collect_config(path), progress=progress)
+
+
+def _run_policy(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
+    from grits_lab.policies.diffusion.training import load_train_config, train_policy
+
+    return train_policy(load_train_config(path), progress=progress)
+
+
+def _run_bc(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
+    from grits_lab.policies.bc.training import load_bc_config, train_bc
+
+    return train_bc(load_bc_config(path), progress=progress)
+
+
+def _run_predictor(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
+    from grits_lab.config import load_config
+    from grits_lab.spillage.checkpoint import load_predictor
+    from grits_lab.spillage.config import PredictorConfig
+    from grits_lab.spillage.training import evaluate_predictor, train_predictor
+
+    summary = train_predictor(load_config(path, PredictorConfig), progress=progress)
+    heldout = layout.dataset("spillage_heldout")
+    if (heldout / "index.parquet").exists() or (heldout / "episodes").is_dir():
+        predictor = load_predictor(predictor_checkpoint(layout, stage))
+        summary = {**summary, "heldout": evaluate_predictor(predictor, heldout)}
+    return summary
+
+
+def _run_evaluate(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
+    from grits_lab.evaluation.config import load_evaluation_config
+    from grits_lab.evaluation.run import evaluate, summary_table
+
+    records = evaluate(load_evaluation_config(path), progress=progress)
+    print(summary_table(records))
+    return {"episodes": len(records)}
+
+
+def _run_sweep(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
+    from grits_lab.tune.config import load_study_config
+    from grits_lab.tune.job import run_sweep
+
+    return run_sweep(load_study_config(path), progress=progress)
+
+
+def _run_report(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
+    from grits_lab.config import load_yaml
+    from grits_lab.report.build import build_report
+
+    data = load_yaml(path)
+    result = build_report(data["run_dir"], data["out"])
+    return {"out_dir": str(result.out_dir), "files": len(result.files), "missing": list(result.missing)}
+
+
+_RUNNERS: dict[str, Callable[[str, Path, Layout, bool], dict[str, Any]]] = {
+    "demos": _run_collect,
+    "spillage": _run_collect,
+    "spillage_heldout": _run_collect,
+    "policy": _run_policy,
+    "bc": _run_bc,
+    "predictor": _run_predictor,
+    "evaluate": _run_evaluate,
+    "sweep": _run_sweep,
+    "report": _run_report,
+}

@@ -1,0 +1,82 @@
+"""The pipeline wires stages together, skips up-to-date stages and re-runs changed ones."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import yaml
+
+from grits_lab.cli import main
+from grits_lab.errors import ConfigError
+from grits_lab.pipeline.config import load_pipeline_config
+from grits_lab.pipeline.run import STATE_FILE, run_pipeline
+
+
+def _write(path, data):
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@pytest.fixture()
+def demos_file(tmp_path):
+    return _write(tmp_path / "demos.yaml", {
+        "kind": "demos", "foods": ["soybeans"], "levels": ["low"], "bowl_configs": 1,
+        "cloud": {"n_points": 64}, "executor": {"backend": "serial"},
+    })
+
+
+def test_bad_pipeline_configs_name_the_problem(tmp_path, demos_file):
+    cases = [
+        ({"name": "x", "output_dir": str(tmp_path), "stages": {"demoz": {"config": str(demos_file)}}}, "unknown stage `stages.demoz`"),
+        ({"name": "x", "output_dir": str(tmp_path), "stages": {"policy": {"config": str(demos_file)}}}, "stage `policy` needs stage `demos`"),
+        ({"name": "x", "output_dir": str(tmp_path), "stages": {"demos": {"config": "nope.yaml"}}}, "`stages.demos.config`: file not found"),
+        ({"name": "x", "output_dir": str(tmp_path), "workers": 0, "stages": {}}, "`workers` must be at least 1"),
+        ({"name": "x", "output_dir": str(tmp_path), "stages": {"demos": {"config": str(demos_file), "overide": {}}}}, "unknown key `stages.demos.overide`"),
+    ]
+    for data, fragment in cases:
+        with pytest.raises(ConfigError, match=fragment.replace("(", r"\(").replace(")", r"\)")):
+            load_pipeline_config(_write(tmp_path / "p.yaml", data))
+
+
+def test_shipped_pipelines_load():
+    for name in ("experiments/quickstart.yaml", "experiments/paper.yaml"):
+        config = load_pipeline_config(name)
+        assert config.ordered_stages()[0] == "demos" and config.ordered_stages()[-1] == "report"
+
+
+def test_up_to_date_stage_is_skipped_and_changed_stage_reruns(tmp_path, demos_file, capsys):
+    out = tmp_path / "run"
+    pipeline = _write(tmp_path / "pipeline.yaml", {
+        "name": "tiny", "output_dir": str(out), "stages": {"demos": {"config": str(demos_file)}},
+    })
+    config = load_pipeline_config(pipeline)
+    first = run_pipeline(config, progress=False)
+    assert first["demos"]["status"] == "done"
+    episodes = sorted((out / "datasets" / "demos" / "episodes").glob("*.npz"))
+    assert len(episodes) == 1
+    wired = yaml.safe_load((out / "configs" / "demos.yaml").read_text())
+    assert wired["output"] == str(out / "datasets" / "demos")
+
+    second = run_pipeline(config, progress=False)
+    assert second["demos"]["status"] == "skipped"
+    assert sorted((out / "datasets" / "demos" / "episodes").glob("*.npz")) == episodes
+
+    changed = _write(tmp_path / "pipeline.yaml", {
+        "name": "tiny", "output_dir": str(out),
+        "stages": {"demos": {"config": str(demos_file), "overrides": {"seed": 5}}},
+    })
+    third = run_pipeline(load_pipeline_config(changed), progress=False)
+    assert third["demos"]["status"] == "done"
+    assert third["demos"]["fingerprint"] != first["demos"]["fingerprint"]
+    state = json.loads((out / STATE_FILE).read_text())
+    assert state["demos"]["fingerprint"] == third["demos"]["fingerprint"]
+    assert "config changed" in capsys.readouterr().err
+
+
+def test_cli_rejects_unknown_stage_selection(tmp_path, demos_file, capsys):
+    pipeline = _write(tmp_path / "pipeline.yaml", {
+        "name": "tiny", "output_dir": str(tmp_path / "run"), "stages": {"demos": {"config": str(demos_file)}},
+    })
+    assert main(["pipeline", str(pipeline), "--only", "policy"]) == 2
+    assert "unknown stage `policy`" in capsys.readouterr().err
