@@ -1,0 +1,173 @@
+"""Run every benchmark and write one JSON and one Markdown summary.
+
+Each benchmark is its own script printing one JSON object; this runner calls them one after the
+other in fresh processes (so one benchmark's threads or Ray instance never slows the next), keeps
+their JSON whole, and pulls the headline figures into a Markdown table. Ratios (2 workers vs 1,
+guided vs unguided) are taken inside one script's run, because absolute times on a shared
+machine drift from minute to minute.
+
+    python benchmarks/run_all.py                       # quick sizes, about 15 minutes on 2 cores
+    python benchmarks/run_all.py --full                # larger repeats, every food, both presets
+    python benchmarks/run_all.py --with-pipeline       # also time `grits-lab pipeline experiments/quickstart.yaml`
+
+Outputs: results/benchmarks/summary.json and results/benchmarks/summary.md (or --out DIR).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import resource
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+
+
+def benchmark_commands(full: bool) -> dict[str, list[str]]:
+    py = sys.executable
+    return {
+        "sim": [py, str(HERE / "bench_sim.py"), "--foods", "all" if full else "soybeans,sago,penne,milk_tea",
+                "--render", "both", "--repeats", "2" if full else "1"],
+        "runners": [py, str(HERE / "bench_runners.py"), "--episodes", "8" if full else "4"],
+        "policy": [py, str(HERE / "bench_policy.py"), "--repeats", "20" if full else "5", "--train-steps", "50" if full else "10"],
+        "predictor": [py, str(HERE / "bench_predictor.py"), "--repeats", "20" if full else "5"],
+        "evaluation": [py, str(HERE / "bench_evaluation.py"), "--presets", *(["cpu", "paper"] if full else ["cpu"]),
+                       "--repeats", "10" if full else "4", "--episodes", "4" if full else "2"],
+    }
+
+
+def run_one(name: str, command: list[str], timeout: float) -> dict:
+    start = time.perf_counter()
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    try:
+        proc = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return {"status": "timeout", "seconds": round(time.perf_counter() - start, 1)}
+    seconds = round(time.perf_counter() - start, 1)
+    peak_mb = max(before, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss) / 1024
+    if proc.returncode != 0:
+        tail = (proc.stderr or proc.stdout).strip().splitlines()[-5:]
+        return {"status": "failed", "seconds": seconds, "returncode": proc.returncode, "error": "\n".join(tail)}
+    text = proc.stdout.strip()
+    try:
+        result = json.loads(text[text.index("{"):])
+    except ValueError:
+        return {"status": "failed", "seconds": seconds, "error": "no JSON object in the output"}
+    return {"status": "ok", "seconds": seconds, "peak_rss_mb_max_so_far": round(peak_mb, 1), "result": result}
+
+
+def time_pipeline(timeout: float) -> dict:
+    out = ROOT / "results" / "benchmarks" / "pipeline_run"
+    if out.exists():
+        shutil.rmtree(out)
+    config = out.parent / "pipeline_quickstart.yaml"
+    text = (ROOT / "experiments" / "quickstart.yaml").read_text()
+    config.write_text(text.replace("output_dir: results/quickstart", f"output_dir: {out}"))
+    start = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "grits_lab.cli", "pipeline", str(config), "--no-progress"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+    seconds = round(time.perf_counter() - start, 1)
+    state_path = out / "pipeline_state.json"
+    stages = json.loads(state_path.read_text()) if state_path.exists() else {}
+    return {"status": "ok" if proc.returncode == 0 else "failed", "seconds": seconds,
+            "stage_seconds": {k: v.get("seconds") for k, v in stages.items()}}
+
+
+def _find(obj, *keys):
+    """First value under any of `keys` anywhere in a nested JSON object."""
+    if isinstance(obj, dict):
+        for key in keys:
+            if key in obj and not isinstance(obj[key], (dict, list)):
+                return obj[key]
+        for value in obj.values():
+            found = _find(value, *keys)
+            if found is not None:
+                return found
+    elif isinstance(obj, list):
+        for value in obj:
+            found = _find(value, *keys)
+            if found is not None:
+                return found
+    return None
+
+
+HEADLINES = [
+    ("sim", "simulated seconds per wall second (rendering off)", ("realtime_factor_off", "sim_s_per_wall_s_off", "realtime_factor")),
+    ("sim", "build + settle time (s)", ("build_settle_s", "build_and_settle_s")),
+    ("runners", "episodes/min, 1 worker", ("episodes_per_min_1",)),
+    ("runners", "episodes/min, 2 workers", ("episodes_per_min_2",)),
+    ("runners", "scaling, 2 workers vs 1", ("scaling_2_vs_1",)),
+    ("runners", "peak memory per worker (MB)", ("peak_rss_mb_per_worker",)),
+    ("policy", "training steps/s (cpu preset)", ("train_steps_per_s",)),
+    ("policy", "plan latency, batch 1 (ms)", ("plan_ms_batch1", "plan_ms_b1")),
+    ("predictor", "DP3 forward+backward, batch 1 (ms)", ("train_fwd_bwd_ms_b1", "fwd_bwd_ms_b1")),
+    ("evaluation", "guided / unguided plan latency", ("guided_over_unguided", "ratio")),
+    ("evaluation", "evaluation episodes/min, 2 workers", ("episodes_per_min",)),
+]
+
+
+def markdown(summary: dict) -> str:
+    lines = [
+        "# grits_lab benchmarks",
+        "",
+        f"Machine: {summary['machine']['cpus']} CPUs, {summary['machine']['platform']}, Python {summary['machine']['python']}; "
+        f"run {summary['date']}. Ratios are taken within one script's run.",
+        "",
+        "| benchmark | figure | value |",
+        "|---|---|---|",
+    ]
+    for bench, label, keys in HEADLINES:
+        entry = summary["benchmarks"].get(bench, {})
+        value = _find(entry.get("result"), *keys) if entry.get("status") == "ok" else entry.get("status", "not run")
+        if isinstance(value, float):
+            value = f"{value:.3g}"
+        lines.append(f"| {bench} | {label} | {value} |")
+    if "pipeline" in summary["benchmarks"]:
+        p = summary["benchmarks"]["pipeline"]
+        lines.append(f"| pipeline | quickstart end to end (s) | {p['seconds']} ({p['status']}) |")
+    lines += ["", "Wall time of each benchmark script:", ""]
+    lines += [f"- {name}: {entry.get('seconds')} s ({entry.get('status')})" for name, entry in summary["benchmarks"].items()]
+    lines += ["", "The full JSON of every script is in summary.json."]
+    return "\n".join(lines) + "\n"
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--full", action="store_true", help="larger sizes (every food, both presets)")
+    parser.add_argument("--only", nargs="+", help="run only these benchmarks")
+    parser.add_argument("--with-pipeline", action="store_true", help="also time the quickstart pipeline end to end")
+    parser.add_argument("--timeout", type=float, default=1800, help="seconds per benchmark")
+    parser.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
+    args = parser.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    import os
+
+    summary = {
+        "date": time.strftime("%Y-%m-%d %H:%M:%S%z"),
+        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version()},
+        "benchmarks": {},
+    }
+    for name, command in benchmark_commands(args.full).items():
+        if args.only and name not in args.only:
+            continue
+        print(f"running {name}: {' '.join(command[1:])}", file=sys.stderr, flush=True)
+        summary["benchmarks"][name] = run_one(name, command, args.timeout)
+        print(f"  {summary['benchmarks'][name]['status']} in {summary['benchmarks'][name]['seconds']} s", file=sys.stderr, flush=True)
+    if args.with_pipeline:
+        print("running the quickstart pipeline", file=sys.stderr, flush=True)
+        summary["benchmarks"]["pipeline"] = time_pipeline(args.timeout * 2)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
+    (out / "summary.md").write_text(markdown(summary))
+    print(markdown(summary))
+    return 0 if all(b.get("status") == "ok" for b in summary["benchmarks"].values()) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
