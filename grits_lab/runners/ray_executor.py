@@ -44,6 +44,24 @@ except ImportError:  # pragma: no cover - older Ray
 _LOST_WORKER = (RayActorError, ActorUnavailableError)
 
 
+def _connect(address: str, kwargs: dict[str, Any]) -> None:
+    """ray.init on an existing cluster, with one clear line when that fails."""
+    try:
+        ray.init(address=address, **kwargs)
+    except Exception as exc:  # Ray raises ConnectionError, RuntimeError or its own types here
+        text = f"{type(exc).__name__}: {exc}"
+        chain, cause = [], exc
+        while cause is not None and len(chain) < 10:
+            chain.append(f"{type(cause).__name__}: {cause}".lower())
+            cause = cause.__cause__ or cause.__context__
+        if any("authentication" in c or "auth token" in c for c in chain):
+            raise GritsError(
+                f"the Ray cluster at {address} requires token authentication: set RAY_AUTH_MODE=token and "
+                "make its token available (`ray get-auth-token` on the head; ~/.ray/auth_token or RAY_AUTH_TOKEN)"
+            ) from None
+        raise GritsError(f"cannot connect to the Ray cluster at {address}: {text.splitlines()[0]}") from None
+
+
 class _EpisodeWorker:
     """Actor body: one WorkerContext (so one simulator) per actor process."""
 
@@ -104,7 +122,7 @@ class RayExecutor(Executor):
             if runtime_env:
                 kwargs["runtime_env"] = runtime_env
             if address:
-                ray.init(address=address, **kwargs)
+                _connect(address, kwargs)
             else:
                 # "local": always a fresh Ray of our own, even if a stale address file of an
                 # earlier `ray start` is left in the temp dir.

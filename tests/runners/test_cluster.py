@@ -98,3 +98,18 @@ def test_collection_runs_unchanged_on_the_cluster(ray_head, tmp_path):
     summary = json.loads(proc.stdout[proc.stdout.index("{"):])
     assert summary["trials"] == 2 and summary["buckets"] == {"sphere/0": 2, "sphere/1": 0}
     assert len(list((tmp_path / "spill" / "episodes").glob("*.npz"))) == 2
+
+
+def test_client_without_token_gets_one_clear_error(ray_head):
+    code = """
+from grits_lab.errors import GritsError
+from grits_lab.runners import ExecutorConfig, make_executor
+try:
+    make_executor(ExecutorConfig(address="ADDRESS"))
+except GritsError as exc:
+    print("ERR", exc)
+"""
+    env = dict(os.environ, RAY_USAGE_STATS_ENABLED="0")
+    env.pop("RAY_AUTH_MODE", None)
+    proc = subprocess.run([sys.executable, "-c", code.replace("ADDRESS", ray_head)], env=env, capture_output=True, text=True, timeout=200)
+    assert f"ERR the Ray cluster at {ray_head} requires token authentication" in proc.stdout, proc.stdout + proc.stderr[-2000:]
