@@ -47,6 +47,10 @@ class SimConfig:
 
     time_step: float = 1.0 / 240.0
     solver_iterations: int = 10
+    # Bullet keeps contact points up to this distance (default 2 cm). With millimetre particles the
+    # default makes every particle track all neighbours within 2 cm; 2 mm cuts a step of 160
+    # beans from ~4.4 ms to ~1.3 ms with the same number of touching contacts.
+    contact_breaking_threshold: float = 0.002
     control_hz: float = 10.0  # rate of the 9-D pose actions
     ik_per_action: int = 4  # IK solves per action on the interpolated pose path
     ik_position_tolerance: float = 0.01  # metres; larger IK residuals count as IK failures
@@ -69,6 +73,7 @@ class SimConfig:
 
     def __post_init__(self) -> None:
         require(1e-4 <= self.time_step <= 0.02, "time_step", self.time_step, "in [0.0001, 0.02] seconds")
+        require(0 < self.contact_breaking_threshold <= 0.05, "contact_breaking_threshold", self.contact_breaking_threshold, "in (0, 0.05] metres")
         require(1 <= self.solver_iterations <= 200, "solver_iterations", self.solver_iterations, "in [1, 200]")
         require(0 < self.control_hz <= 100, "control_hz", self.control_hz, "in (0, 100]")
         require(self.ik_per_action >= 1, "ik_per_action", self.ik_per_action, ">= 1")

@@ -224,7 +224,7 @@ def build_world(config: SimConfig, components: list[SampledParticles], rng: np.r
     client.setAdditionalSearchPath(pybullet_data.getDataPath())
     client.setPhysicsEngineParameter(
         fixedTimeStep=config.time_step, numSolverIterations=config.solver_iterations, numSubSteps=0,
-        deterministicOverlappingPairs=1,
+        deterministicOverlappingPairs=1, contactBreakingThreshold=config.contact_breaking_threshold,
     )
     client.setGravity(0, 0, -9.81)
 
