@@ -1,8 +1,9 @@
 """Spillage dataset: shifted mean-expert trajectories over random primitive foods, labelled by simulation, balanced.
 
-A candidate trial (shape, k) draws its particle parameters and its trajectory shift from its own
-seed, runs the trajectory, and records the spilled count at every waypoint. The trajectory is cut
-into chunks of `chunk_len` waypoints (the policy's n_action_steps); each chunk stores the composite
+A candidate trial (shape, k) draws its particle parameters, its trajectory shift and the speed of
+its exit from the bowl from its own seed, runs the base scoop followed by the lift-and-exit towards
+the transfer (food falling off the spoon outside the bowl is spillage), and records the spilled
+count at every waypoint. The trajectory is cut into chunks of `chunk_len` waypoints (the policy's n_action_steps); each chunk stores the composite
 and raw clouds observed at its start and whether the spilled count rose during it (contract 4).
 The label is 1 if any chunk spilled. Candidates are accepted in index order per shape until every
 (shape, label) bucket is full (`grits_lab.data.balance`); the acceptance rate is reported.
@@ -61,6 +62,24 @@ class ShiftConfig:
 
 
 @dataclass
+class ExitConfig:
+    # The lift-and-exit after the scoop: the spoon leaves the bowl towards the target workspace
+    # (where the transfer goes), so food that falls off the spoon outside the bowl is spillage.
+    enabled: bool = True
+    distance: float = 0.14  # spoon centre this far from the bowl axis at the end (outer rim: 8.6 cm)
+    rise: float = 0.02  # metres gained on the way out
+    # Average exit speed (m/s, eased in and out), drawn per trial: a brisk exit sheds a loaded
+    # spoon's top layer, a slow one keeps it, so the speed is part of what decides the label.
+    speed: tuple[float, float] = (0.25, 0.8)
+    hold_steps: int = 5  # actions holding still at the end so falling food lands
+
+    def __post_init__(self) -> None:
+        require(self.distance > 0, "exit.distance", self.distance, "positive")
+        require(0 < self.speed[0] <= self.speed[1], "exit.speed", list(self.speed), "a range [low, high] with 0 < low <= high")
+        require(self.hold_steps >= 0, "exit.hold_steps", self.hold_steps, "non-negative")
+
+
+@dataclass
 class SpillageConfig:
     kind: Literal["spillage"] = "spillage"
     output: str = "results/datasets/spillage"
@@ -80,6 +99,7 @@ class SpillageConfig:
     raw_cloud: bool = True
     particles: ParticleRanges = field(default_factory=ParticleRanges)
     shift: ShiftConfig = field(default_factory=ShiftConfig)
+    exit: ExitConfig = field(default_factory=ExitConfig)
     sim: dict[str, Any] = field(default_factory=dict)
     cloud: CloudConfig = field(default_factory=CloudConfig)
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)
@@ -118,6 +138,7 @@ class SpillageTrialParams:
     raw_cloud: bool
     shift: list[float]
     shift_scale: float
+    exit_speed: float = 0.0
 
 
 CANDIDATE_LOG = "candidates.jsonl"
@@ -173,9 +194,15 @@ class CandidateLog:
 
 def make_trial_spec(config: SpillageConfig, sim: Any, base: np.ndarray, bowl: dict[str, Any], shape: str, index: int) -> EpisodeSpec:
     """The spec of candidate (shape, index): its seed, its shifted trajectory and its parameters."""
-    from grits_lab.data.trajectories import shift_trajectory
+    from grits_lab.data.trajectories import append_exit, shift_trajectory
 
     seed = derive_seed(config.seed, "spillage", shape, index)
+    exit_speed = 0.0
+    if config.exit.enabled:
+        e = config.exit
+        exit_speed = float(make_rng(derive_seed(seed, "exit")).uniform(*e.speed))
+        direction = np.asarray(sim.target_workspace_center, dtype=np.float64) - np.asarray(bowl["center"][:2])
+        base = append_exit(base, bowl["center"], direction, e.distance, e.rise, exit_speed, e.hold_steps, sim.control_hz)
     rng = make_rng(derive_seed(seed, "shift"))
     s = config.shift
     shift = rng.uniform(-1.0, 1.0, 3) * np.array([s.x, s.y, s.z])
@@ -185,7 +212,7 @@ def make_trial_spec(config: SpillageConfig, sim: Any, base: np.ndarray, bowl: di
     )
     params = SpillageTrialParams(
         sim=sim, cloud=config.cloud, particles=config.particles, shape=shape, chunk_len=config.chunk_len,
-        raw_cloud=config.raw_cloud, shift=[float(v) for v in shift], shift_scale=float(scale),
+        raw_cloud=config.raw_cloud, shift=[float(v) for v in shift], shift_scale=float(scale), exit_speed=exit_speed,
     )
     return EpisodeSpec(
         episode_id=candidate_id(shape, index), work="spillage", seed=seed, trajectory=traj.astype(np.float32),
@@ -382,6 +409,7 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "shift_y": p.shift[1],
         "shift_z": p.shift[2],
         "shift_scale": p.shift_scale,
+        "exit_speed": p.exit_speed,
         "radius": float(component.get("radius", 0.0)),
         "half_length": float(component.get("half_length", 0.0)),
         "mass": float(component.get("mass_mean", 0.0)),

@@ -41,6 +41,42 @@ def mean_trajectory(trajectories: Sequence[np.ndarray], length: int | None = Non
     return mean
 
 
+def append_exit(
+    base: np.ndarray,
+    bowl_center: np.ndarray,
+    direction_xy: np.ndarray,
+    distance: float,
+    rise: float,
+    speed: float,
+    hold_steps: int,
+    control_hz: float,
+) -> np.ndarray:
+    """The base scoop followed by the lift-and-exit towards the transfer: (T + n_exit + hold_steps, 9).
+
+    From the scoop's last pose the spoon travels horizontally along `direction_xy` until its centre
+    is `distance` from the bowl's axis, rising by `rise`, at an average `speed` (m/s, eased in and
+    out like the expert's keyframes), keeping its orientation; then it holds still for
+    `hold_steps` actions so that food sliding off the spoon lands before the trial ends. Food that
+    falls off once the spoon is past the rim lands on the table, which is the spillage a real
+    scoop-and-transfer causes when the spoon is overloaded or tilted.
+    """
+    base = as_pose9(base)
+    d = np.asarray(direction_xy, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    last = base[-1]
+    rel = last[:2] - np.asarray(bowl_center, dtype=np.float64)[:2]
+    # Distance to travel along d so that |rel + s d| = distance (the positive root).
+    b = float(rel @ d)
+    s_end = -b + float(np.sqrt(max(b * b - (rel @ rel - distance**2), 0.0)))
+    n = max(1, int(np.ceil(s_end / speed * control_hz)))
+    u = 0.5 - 0.5 * np.cos(np.pi * np.arange(1, n + 1) / n)
+    exit_ = np.repeat(last[None], n + hold_steps, axis=0)
+    exit_[:n, :2] = last[:2] + np.outer(u * s_end, d)
+    exit_[:n, 2] = last[2] + u * rise
+    exit_[n:, :3] = exit_[n - 1, :3]
+    return np.concatenate([base, exit_], axis=0)
+
+
 def shift_trajectory(
     base: np.ndarray,
     shift: np.ndarray,
@@ -51,39 +87,49 @@ def shift_trajectory(
     clearance: float = 0.02,
     ramp_steps: int = 5,
 ) -> tuple[np.ndarray, float]:
-    """Shift a trajectory's positions by `shift` (3,), scaled down as little as needed to stay feasible.
+    """Shift a trajectory's positions by `shift` (3,), each waypoint projected back into the feasible region.
 
     The shift ramps in over the first `ramp_steps` waypoints (the spoon starts from its home pose).
-    Feasible: every waypoint below the rim stays `clearance` inside the bowl's inner wall and above
-    its floor, or no further out than the base trajectory itself goes. Returns the trajectory and
-    the scale applied to the shift (1.0 = unchanged).
+    Feasible: below the rim, and above it where the base lies over the bowl (inside its rim
+    circle), the spoon's centre stays `clearance` inside the bowl's inner wall at its height (the
+    rim's radius above the rim); below the rim it also stays 5 mm above the floor. Where the base
+    itself is further out or lower, the base's own excess is allowed. An infeasible waypoint is
+    moved the least: up to the floor margin, then radially in to the wall margin, so the rest of
+    the shift survives (a shift into the far wall drags the spoon along it, as a person scraping
+    the side would). Waypoints above the rim with the base outside the rim circle (the approach
+    from home, the exit towards the transfer) keep the full shift. Returns the trajectory and the mean fraction of the shift kept
+    over the shifted waypoints (1.0 = applied in full).
     """
     base = as_pose9(base)
+    shift = np.asarray(shift, dtype=np.float64)
     ramp = np.minimum(1.0, (np.arange(len(base)) + 1) / max(1, ramp_steps))[:, None]
     center = np.asarray(bowl_center, dtype=np.float64)
+    rim_radius = float(inner_radius_at(rim_height))
+    base_rel = base[:, :3] - center
+    base_r = np.linalg.norm(base_rel[:, :2], axis=1)
+    over_bowl = base_r < rim_radius
 
-    def violation(traj: np.ndarray) -> np.ndarray:
-        """(T, 2): how far each waypoint is outside the wall margin and below the floor margin (<= 0: fine)."""
-        rel = traj[:, :3] - center
-        inside = (rel[:, 2] < rim_height)[:, None]
-        radial = np.linalg.norm(rel[:, :2], axis=1) - (inner_radius_at(rel[:, 2]) - clearance)
-        below = (floor_height + 0.005) - rel[:, 2]
-        return np.where(inside, np.stack([radial, below], axis=1), -np.inf)
+    def wall_margin(z: np.ndarray) -> np.ndarray:
+        return inner_radius_at(np.minimum(z, rim_height)) - clearance
 
-    allowed = np.maximum(violation(base), 0.0) + 1e-9  # per waypoint and per constraint
+    floor_margin = floor_height + 0.005
+    # The base's own excess over each margin is allowed (its waypoints are feasible by definition).
+    floor_allowed = np.where(base_rel[:, 2] < rim_height, np.minimum(floor_margin, base_rel[:, 2]), -np.inf)
+    wall_excess = np.maximum(base_r - wall_margin(base_rel[:, 2]), 0.0)
 
-    def shifted(scale: float) -> np.ndarray:
-        out = base.copy()
-        out[:, :3] += scale * ramp * np.asarray(shift, dtype=np.float64)
-        return out
-
-    if np.all(violation(shifted(1.0)) <= allowed):
-        return shifted(1.0), 1.0
-    lo, hi = 0.0, 1.0
-    for _ in range(12):
-        mid = 0.5 * (lo + hi)
-        if np.all(violation(shifted(mid)) <= allowed):
-            lo = mid
-        else:
-            hi = mid
-    return shifted(lo), lo
+    rel = base_rel + ramp * shift
+    # Floor first (a lower waypoint is moved up), then the wall at the resulting height.
+    below_rim = rel[:, 2] < rim_height
+    rel[:, 2] = np.where(below_rim, np.maximum(rel[:, 2], floor_allowed), rel[:, 2])
+    r = np.linalg.norm(rel[:, :2], axis=1)
+    r_max = wall_margin(rel[:, 2]) + wall_excess
+    too_far = (over_bowl | (rel[:, 2] < rim_height)) & (r > r_max)
+    factor = np.where(too_far, r_max / np.maximum(r, 1e-12), 1.0)
+    rel[:, :2] *= factor[:, None]
+    out = base.copy()
+    out[:, :3] = rel + center
+    wanted = np.linalg.norm(ramp * shift, axis=1)
+    kept = np.linalg.norm(out[:, :3] - base[:, :3], axis=1)
+    moved = wanted > 1e-12
+    scale = float(np.mean(np.minimum(kept[moved] / wanted[moved], 1.0))) if moved.any() else 1.0
+    return out, scale
