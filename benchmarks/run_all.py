@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import resource
 import shutil
@@ -46,7 +47,7 @@ def run_one(name: str, command: list[str], timeout: float) -> dict:
     start = time.perf_counter()
     before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     try:
-        proc = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+        proc = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False)
     except subprocess.TimeoutExpired:
         return {"status": "timeout", "seconds": round(time.perf_counter() - start, 1)}
     seconds = round(time.perf_counter() - start, 1)
@@ -71,7 +72,7 @@ def time_pipeline(timeout: float) -> dict:
     config.write_text(text.replace("output_dir: results/quickstart", f"output_dir: {out}"))
     start = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "grits_lab.cli", "pipeline", str(config), "--no-progress"],
-                          cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+                          cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False)
     seconds = round(time.perf_counter() - start, 1)
     state_path = out / "pipeline_state.json"
     stages = json.loads(state_path.read_text()) if state_path.exists() else {}
@@ -79,37 +80,44 @@ def time_pipeline(timeout: float) -> dict:
             "stage_seconds": {k: v.get("seconds") for k, v in stages.items()}}
 
 
-def _find(obj, *keys):
-    """First value under any of `keys` anywhere in a nested JSON object."""
-    if isinstance(obj, dict):
-        for key in keys:
-            if key in obj and not isinstance(obj[key], (dict, list)):
-                return obj[key]
-        for value in obj.values():
-            found = _find(value, *keys)
-            if found is not None:
-                return found
-    elif isinstance(obj, list):
-        for value in obj:
-            found = _find(value, *keys)
-            if found is not None:
-                return found
-    return None
+def _median(values: list) -> float | None:
+    values = sorted(v for v in values if v is not None)
+    return values[len(values) // 2] if values else None
 
 
-HEADLINES = [
-    ("sim", "simulated seconds per wall second (rendering off)", ("realtime_factor_off", "sim_s_per_wall_s_off", "realtime_factor")),
-    ("sim", "build + settle time (s)", ("build_settle_s", "build_and_settle_s")),
-    ("runners", "episodes/min, 1 worker", ("episodes_per_min_1",)),
-    ("runners", "episodes/min, 2 workers", ("episodes_per_min_2",)),
-    ("runners", "scaling, 2 workers vs 1", ("scaling_2_vs_1",)),
-    ("runners", "peak memory per worker (MB)", ("peak_rss_mb_per_worker",)),
-    ("policy", "training steps/s (cpu preset)", ("train_steps_per_s",)),
-    ("policy", "plan latency, batch 1 (ms)", ("plan_ms_batch1", "plan_ms_b1")),
-    ("predictor", "DP3 forward+backward, batch 1 (ms)", ("train_fwd_bwd_ms_b1", "fwd_bwd_ms_b1")),
-    ("evaluation", "guided / unguided plan latency", ("guided_over_unguided", "ratio")),
-    ("evaluation", "evaluation episodes/min, 2 workers", ("episodes_per_min",)),
-]
+def _sim_rows(result: dict, render: str) -> list[dict]:
+    return [row for row in result.get("results", []) if row.get("render") == render]
+
+
+def headlines(name: str, result: dict) -> list[tuple[str, object]]:
+    """The figures of one benchmark worth a line in the summary table."""
+    if name == "sim":
+        off, on = _sim_rows(result, "off"), _sim_rows(result, "on")
+        return [
+            ("simulated s per CPU s, rendering off (median over foods)", _median([r["sim_per_cpu"] for r in off])),
+            ("simulated s per CPU s, rendering on (median over foods)", _median([r["sim_per_cpu"] for r in on])),
+            ("simulated s per wall s, rendering off (median over foods)", _median([r["sim_per_wall"] for r in off])),
+            ("episodes/min on one core, rendering off (CPU time)", _median([r["episodes_per_minute_cpu"] for r in off])),
+            ("build + settle, CPU s (median)", _median([r["build_settle_cpu_s"] for r in off + on])),
+        ]
+    if name == "runners":
+        keys = ["episodes_per_min_bare", "episodes_per_min_1", "episodes_per_min_2", "scaling_2_vs_1",
+                "engine_overhead_2_workers", "peak_rss_mb_per_worker"]
+        return [(key, result.get(key)) for key in keys]
+    if name == "policy":
+        return [(key, value) for key, value in result.items()
+                if key.startswith(("train_steps_per_s", "plan_ms_batch", "guided_x0_over_unguided"))]
+    if name == "predictor":
+        return [(key, value) for key, value in result.items() if key.startswith("dp3_batch1")]
+    if name == "evaluation":
+        rows = []
+        for key, value in result.items():
+            if isinstance(value, dict) and "ratio_guided_over_unguided" in value:
+                rows.append((f"{key}: guided / unguided plan latency", value["ratio_guided_over_unguided"]))
+            if isinstance(value, dict) and "episodes_per_minute" in value:
+                rows.append((f"{key}: evaluation episodes/min", value["episodes_per_minute"]))
+        return rows
+    return []
 
 
 def markdown(summary: dict) -> str:
@@ -122,12 +130,15 @@ def markdown(summary: dict) -> str:
         "| benchmark | figure | value |",
         "|---|---|---|",
     ]
-    for bench, label, keys in HEADLINES:
-        entry = summary["benchmarks"].get(bench, {})
-        value = _find(entry.get("result"), *keys) if entry.get("status") == "ok" else entry.get("status", "not run")
-        if isinstance(value, float):
-            value = f"{value:.3g}"
-        lines.append(f"| {bench} | {label} | {value} |")
+    for bench, entry in summary["benchmarks"].items():
+        if bench == "pipeline":
+            continue
+        if entry.get("status") != "ok":
+            lines.append(f"| {bench} | (benchmark {entry.get('status')}) | |")
+            continue
+        for label, value in headlines(bench, entry["result"]):
+            shown = f"{value:.3g}" if isinstance(value, float) else value
+            lines.append(f"| {bench} | {label} | {shown} |")
     if "pipeline" in summary["benchmarks"]:
         p = summary["benchmarks"]["pipeline"]
         lines.append(f"| pipeline | quickstart end to end (s) | {p['seconds']} ({p['status']}) |")
@@ -147,7 +158,6 @@ def main() -> int:
     args = parser.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    import os
 
     summary = {
         "date": time.strftime("%Y-%m-%d %H:%M:%S%z"),
