@@ -57,7 +57,7 @@ def _short_spillage_config(tmp_path, **overrides):
         "kind": "spillage", "output": str(tmp_path / "spill"), "trials": 2, "spill_fraction": 0.0, "shapes": ["sphere"],
         "base_trajectory": str(tmp_path / "base.npy"), "particles": {"layers": [1, 1], "radius": [0.004, 0.006]},
         "cloud": {"n_points": 200, "cad_surface_samples": 2000}, "sim": {"cameras": SMALL_CAMERAS},
-        "executor": {"backend": "serial"},
+        "executor": {"backend": "serial"}, "exit": {"enabled": False},
     }
     data.update(overrides)
     return config_from_dict(SpillageConfig, data)
