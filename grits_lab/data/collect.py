@@ -10,6 +10,7 @@ seeds, so an interrupted and resumed job ends with the same dataset as an uninte
 from __future__ import annotations
 
 import json
+import sys
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -18,13 +19,11 @@ import yaml
 
 from grits_lab.config import config_fingerprint, config_to_dict
 from grits_lab.data.format import (
-    EPISODE_DIR,
     FORMAT_VERSION,
     MANIFEST_FILE,
-    episode_path,
     list_episode_files,
-    read_meta,
     rebuild_index,
+    verify_episode,
     write_episode,
 )
 from grits_lab.errors import StorageError
@@ -99,12 +98,13 @@ class DatasetWriter:
         write_text_atomic(self.out_dir / MANIFEST_FILE, yaml.safe_dump(self.manifest, sort_keys=False))
 
     def finished(self) -> dict[str, dict[str, Any]]:
-        """Meta of every readable episode on disk, by id; unreadable files are removed (they are re-run)."""
+        """Meta of every intact episode on disk, by id; damaged files are reported and removed (they are re-run)."""
         done = {}
         for path in list_episode_files(self.out_dir):
             try:
-                meta = read_meta(path)
-            except StorageError:
+                meta = verify_episode(path)
+            except StorageError as exc:
+                print(f"warning: {exc}; the episode will be regenerated", file=sys.stderr)
                 path.unlink(missing_ok=True)
                 continue
             done[meta["episode_id"]] = meta

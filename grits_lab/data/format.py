@@ -62,6 +62,23 @@ def read_meta(path: str | Path) -> dict[str, Any]:
     return read_episode(path, keys=())[1]
 
 
+def verify_episode(path: str | Path) -> dict[str, Any]:
+    """Check every array of an episode file against its stored checksum; return its meta.
+
+    `read_meta` only decompresses the metadata, so a file damaged in one of its arrays would pass
+    it; resuming jobs use this full check so that a damaged episode is regenerated, never used.
+    """
+    path = Path(path)
+    try:
+        with zipfile.ZipFile(path) as archive:
+            bad = archive.testzip()
+    except (OSError, zipfile.BadZipFile, EOFError, ValueError) as exc:
+        raise StorageError(f"corrupted or unreadable episode file {path}: {exc}") from None
+    if bad is not None:
+        raise StorageError(f"corrupted episode file {path}: checksum mismatch in `{bad}`")
+    return read_meta(path)
+
+
 def list_episode_files(dataset_dir: str | Path) -> list[Path]:
     return sorted((Path(dataset_dir) / EPISODE_DIR).glob("*.npz"))
 

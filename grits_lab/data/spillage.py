@@ -269,6 +269,18 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
                 break
             k += 1
 
+    # Accepted trials whose files are gone (writer.finished() removes damaged files) are re-run
+    # from their seeds; the simulation is deterministic, so they come back identical.
+    missing = [(e["shape"], int(e["index"])) for cid, e in logged.items() if e.get("accepted") and cid not in on_disk]
+    while missing or executor.pending():
+        while missing and executor.capacity() > 0:
+            executor.submit(make_trial_spec(config, sim, base, bowl, *missing.pop(0)))
+        for result in executor.poll():
+            if result.ok:
+                writer.write(result.episode_id, result.payload)
+            else:
+                writer.write_failure(result.episode_id, failure_record(result))
+
     in_flight: dict[str, str] = {}
     start = time.perf_counter()
     try:
