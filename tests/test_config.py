@@ -40,7 +40,7 @@ def test_valid_mapping_builds_nested_dataclasses():
     [
         ({"inner": {"cuont": 1}}, "unknown key `inner.cuont`"),
         ({"inner": {"count": "three"}}, "`inner.count` must be an integer"),
-        ({"inner": {"count": -1}}, "`count` must be a positive integer. Got -1."),
+        ({"inner": {"count": -1}}, "`inner.count` must be a positive integer. Got -1."),
         ({"mode": "medium"}, "`mode` must be one of 'fast', 'slow'"),
         ({"sizes": [1, "a"]}, "`sizes[1]` must be an integer"),
         ({"inner": 5}, "`inner` must be a mapping"),
@@ -62,7 +62,7 @@ def test_load_config_reports_file_and_yaml_errors(tmp_path):
         load_config(bad, OuterConfig)
     wrong = tmp_path / "wrong.yaml"
     wrong.write_text("inner:\n  count: 0\n")
-    with pytest.raises(ConfigError, match=r"wrong.yaml: `count` must be a positive integer"):
+    with pytest.raises(ConfigError, match=r"wrong.yaml: `inner.count` must be a positive integer"):
         load_config(wrong, OuterConfig)
 
 

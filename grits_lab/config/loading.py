@@ -76,6 +76,11 @@ def config_from_dict(cls: type[T], data: Any, prefix: str = "") -> T:
         return cls(**kwargs)
     except TypeError as exc:  # a required field is missing
         raise ConfigError(f"`{prefix or cls.__name__}`: {exc}") from None
+    except ConfigError as exc:  # a range check in __post_init__: name the key by its full path
+        message = str(exc)
+        if prefix and message.startswith("`") and not message.startswith(f"`{prefix}."):
+            message = f"`{prefix}.{message[1:]}"
+        raise ConfigError(message) from None
 
 
 def _coerce(tp: Any, value: Any, key: str) -> Any:

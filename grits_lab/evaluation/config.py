@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from grits_lab.config import config_from_dict, load_yaml, require
+from grits_lab.config import config_from_dict, load_yaml, merge_mappings, require
+from grits_lab.sampling.guidance import PostHocConfig
 from grits_lab.errors import ConfigError
 from grits_lab.perception.composite import CloudConfig
 from grits_lab.runners.config import ExecutorConfig
@@ -36,19 +37,6 @@ class GuidanceSettings:
         require(self.rho >= 0, "guidance.rho", self.rho, "non-negative")
         require(self.s >= -1, "guidance.s", self.s, "at least -1 (-1 guides no step)")
         require(self.grad_clip is None or self.grad_clip > 0, "guidance.grad_clip", self.grad_clip, "positive or null")
-
-
-@dataclass
-class PostHocSettings:
-    """Diffusion Policy (Post.): gradient steps on the finished trajectory (authors' code: 6)."""
-
-    rho: float = 2.5
-    n_steps: int = 6
-    grad_clip: float | None = None
-
-    def __post_init__(self) -> None:
-        require(self.rho >= 0, "posthoc.rho", self.rho, "non-negative")
-        require(self.n_steps >= 0, "posthoc.n_steps", self.n_steps, "non-negative")
 
 
 @dataclass
@@ -137,7 +125,7 @@ class EvaluationConfig:
     trials: int = 5
     checkpoints: CheckpointPaths = field(default_factory=CheckpointPaths)
     guidance: GuidanceSettings = field(default_factory=GuidanceSettings)
-    posthoc: PostHocSettings = field(default_factory=PostHocSettings)
+    posthoc: PostHocConfig = field(default_factory=PostHocConfig)  # Diffusion Policy (Post.): authors' code, 6 steps
     scoop: ScoopSettings = field(default_factory=ScoopSettings)
     transfer: TransferSettings = field(default_factory=TransferSettings)
     rule_based: RuleBasedSettings = field(default_factory=RuleBasedSettings)
@@ -166,19 +154,8 @@ def load_evaluation_config(path: str | Path, overrides: dict[str, Any] | None = 
     """Load an evaluation YAML, with `overrides` (e.g. {"guidance": {"rho": 1.0, "s": 24}}) merged in."""
     data = load_yaml(path)
     if overrides:
-        data = merge(data, overrides)
+        data = merge_mappings(data, overrides)
     try:
         return config_from_dict(EvaluationConfig, data)
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
-
-
-def merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
-    """Recursive dict merge: mappings merge key by key, anything else is replaced."""
-    out = dict(base)
-    for key, value in override.items():
-        if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = merge(out[key], value)
-        else:
-            out[key] = value
-    return out

@@ -78,7 +78,7 @@ class DiffusionController:
     stops_when_still = True
 
     def __init__(self, policy: Any, predictor: Any, sampler_kind: str, guidance: Any, posthoc: Any, raw_cloud: bool = False) -> None:
-        from grits_lab.sampling import DDIMSampler, GuidanceConfig, PostHocConfig, PostHocSampler
+        from grits_lab.sampling import DDIMSampler, GuidanceConfig, PostHocSampler
 
         self.policy = policy
         self.predictor = predictor
@@ -97,7 +97,7 @@ class DiffusionController:
                 grad_clip=guidance.grad_clip, clip_estimate=guidance.clip_estimate, diagnostics=True,
             ))
         elif sampler_kind == "posthoc":
-            self.sampler = PostHocSampler(scheduler, PostHocConfig(rho=posthoc.rho, n_steps=posthoc.n_steps, grad_clip=posthoc.grad_clip))
+            self.sampler = PostHocSampler(scheduler, posthoc)
         else:
             self.sampler = policy.sampler
         self.plans = 0

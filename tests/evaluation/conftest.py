@@ -16,7 +16,7 @@ from grits_lab.sim import SimConfig
 from grits_lab.sim.env import scene_geometry
 from grits_lab.sim.expert import expert_trajectory
 
-N_POINTS = 32
+from eval_helpers import N_POINTS  # noqa: E402  (shared with the config builder)
 
 
 def _clouds(rng: np.random.Generator, poses: np.ndarray, bowl: np.ndarray, food_top: float) -> np.ndarray:
@@ -102,19 +102,3 @@ def models(tmp_path_factory) -> dict[str, str]:
     train_predictor(pred_cfg, progress=False)
     return {"policy": str(root / "dp" / "checkpoints" / "last.pt"), "bc": str(root / "bc" / "checkpoints" / "last.pt"),
             "predictor": str(root / "predictor" / "tiny" / "best.pt"), "demos": str(demos)}
-
-
-def eval_config(models: dict[str, str], tmp: Path, **changes):
-    """A small evaluation config: a few-particle training food, short scoops, serial executor."""
-    from grits_lab.evaluation.config import EvaluationConfig
-
-    data = {
-        "run_id": "test", "output_dir": str(tmp), "seed": 3, "methods": ["dp"], "foods": ["chocolate_balls"], "levels": ["low"],
-        "trials": 1, "checkpoints": {"policy": models["policy"], "predictor": models["predictor"], "predictor_raw": models["predictor"],
-                                      "predictor_pointnet2": models["predictor"], "bc": models["bc"], "demos": models["demos"]},
-        "scoop": {"max_steps": 36, "min_steps": 12}, "transfer": {"pour_steps": 8, "settle_steps": 5},
-        "cloud": {"n_points": N_POINTS, "cad_surface_samples": 400}, "executor": {"backend": "serial"},
-    }
-    for key, value in changes.items():
-        data[key] = {**data[key], **value} if isinstance(value, dict) and isinstance(data.get(key), dict) else value
-    return config_from_dict(EvaluationConfig, data)

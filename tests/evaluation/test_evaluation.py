@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from conftest import eval_config
+from eval_helpers import eval_config
 from grits_lab.errors import ConfigError
 from grits_lab.evaluation.methods import METHODS
 from grits_lab.evaluation.run import evaluate, evaluate_guidance

@@ -6,7 +6,7 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
-from conftest import eval_config  # noqa: E402
+from eval_helpers import eval_config  # noqa: E402
 from grits_lab.evaluation.run import evaluate  # noqa: E402
 from grits_lab.runners.ray_executor import RayExecutor  # noqa: E402
 
