@@ -87,3 +87,12 @@ def pose9_to_pose7(pose9: np.ndarray) -> np.ndarray:
     """(..., 9) xyz + 6-D rotation -> (..., 7) xyz + quaternion xyzw."""
     p = np.asarray(pose9, dtype=np.float64)
     return np.concatenate([p[..., :3], rot6d_to_quat(p[..., 3:9])], axis=-1)
+
+
+def axis_angle_matrix(axis: np.ndarray, angles: np.ndarray | float) -> np.ndarray:
+    """(..., 3, 3) rotations by `angles` (radians) about one unit `axis` (3,), by Rodrigues' formula."""
+    k = np.asarray(axis, dtype=np.float64)
+    k = k / np.linalg.norm(k)
+    a = np.asarray(angles, dtype=np.float64)[..., None, None]
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * (K @ K)

@@ -1,7 +1,7 @@
 """Spillage dataset: shifted mean-expert trajectories over random primitive foods, labelled by simulation, balanced.
 
 A candidate trial (shape, k) draws its particle parameters, its trajectory shift and the speed of
-its exit from the bowl from its own seed, runs the base scoop followed by the lift-and-exit towards
+its exit from the bowl from its own seed, as well as how far the spoon rolls on that exit, runs the base scoop followed by the lift-and-exit towards
 the transfer (food falling off the spoon outside the bowl is spillage), and records the spilled
 count at every waypoint. The trajectory is cut into chunks of `chunk_len` waypoints (the policy's n_action_steps); each chunk stores the composite
 and raw clouds observed at its start and whether the spilled count rose during it (contract 4).
@@ -71,11 +71,17 @@ class ExitConfig:
     # Average exit speed (m/s, eased in and out), drawn per trial: a brisk exit sheds a loaded
     # spoon's top layer, a slow one keeps it, so the speed is part of what decides the label.
     speed: tuple[float, float] = (0.25, 0.8)
+    # Roll of the spoon about its direction of travel during the exit (degrees, magnitude drawn
+    # per trial, sign random): how far the spoon tips decides whether its load slides off, and
+    # only the trajectory carries it, so the predictor has to read the trajectory, not just the
+    # cloud at the chunk's start. (0, 0) exits level.
+    tilt_deg: tuple[float, float] = (0.0, 50.0)
     hold_steps: int = 5  # actions holding still at the end so falling food lands
 
     def __post_init__(self) -> None:
         require(self.distance > 0, "exit.distance", self.distance, "positive")
         require(0 < self.speed[0] <= self.speed[1], "exit.speed", list(self.speed), "a range [low, high] with 0 < low <= high")
+        require(0 <= self.tilt_deg[0] <= self.tilt_deg[1] <= 90, "exit.tilt_deg", list(self.tilt_deg), "a range [low, high] with 0 <= low <= high <= 90")
         require(self.hold_steps >= 0, "exit.hold_steps", self.hold_steps, "non-negative")
 
 
@@ -139,6 +145,7 @@ class SpillageTrialParams:
     shift: list[float]
     shift_scale: float
     exit_speed: float = 0.0
+    exit_tilt_deg: float = 0.0
 
 
 CANDIDATE_LOG = "candidates.jsonl"
@@ -197,12 +204,17 @@ def make_trial_spec(config: SpillageConfig, sim: Any, base: np.ndarray, bowl: di
     from grits_lab.data.trajectories import append_exit, shift_trajectory
 
     seed = derive_seed(config.seed, "spillage", shape, index)
-    exit_speed = 0.0
+    exit_speed = exit_tilt = 0.0
     if config.exit.enabled:
         e = config.exit
         exit_speed = float(make_rng(derive_seed(seed, "exit")).uniform(*e.speed))
+        tilt_rng = make_rng(derive_seed(seed, "exit-tilt"))
+        exit_tilt = float(tilt_rng.uniform(*e.tilt_deg) * tilt_rng.choice([-1.0, 1.0]))
         direction = np.asarray(sim.target_workspace_center, dtype=np.float64) - np.asarray(bowl["center"][:2])
-        base = append_exit(base, bowl["center"], direction, e.distance, e.rise, exit_speed, e.hold_steps, sim.control_hz)
+        base = append_exit(
+            base, bowl["center"], direction, e.distance, e.rise, exit_speed, e.hold_steps, sim.control_hz,
+            tilt=np.deg2rad(exit_tilt),
+        )
     rng = make_rng(derive_seed(seed, "shift"))
     s = config.shift
     shift = rng.uniform(-1.0, 1.0, 3) * np.array([s.x, s.y, s.z])
@@ -213,6 +225,7 @@ def make_trial_spec(config: SpillageConfig, sim: Any, base: np.ndarray, bowl: di
     params = SpillageTrialParams(
         sim=sim, cloud=config.cloud, particles=config.particles, shape=shape, chunk_len=config.chunk_len,
         raw_cloud=config.raw_cloud, shift=[float(v) for v in shift], shift_scale=float(scale), exit_speed=exit_speed,
+        exit_tilt_deg=exit_tilt,
     )
     return EpisodeSpec(
         episode_id=candidate_id(shape, index), work="spillage", seed=seed, trajectory=traj.astype(np.float32),
@@ -422,6 +435,7 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "shift_z": p.shift[2],
         "shift_scale": p.shift_scale,
         "exit_speed": p.exit_speed,
+        "exit_tilt_deg": p.exit_tilt_deg,
         "radius": float(component.get("radius", 0.0)),
         "half_length": float(component.get("half_length", 0.0)),
         "mass": float(component.get("mass_mean", 0.0)),

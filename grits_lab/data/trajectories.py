@@ -6,7 +6,7 @@ from typing import Sequence
 
 import numpy as np
 
-from grits_lab.geometry import matrix_to_rot6d, pose7_to_pose9, rot6d_to_matrix
+from grits_lab.geometry import axis_angle_matrix, matrix_to_rot6d, pose7_to_pose9, rot6d_to_matrix
 
 
 def as_pose9(traj: np.ndarray) -> np.ndarray:
@@ -50,15 +50,18 @@ def append_exit(
     speed: float,
     hold_steps: int,
     control_hz: float,
+    tilt: float = 0.0,
 ) -> np.ndarray:
     """The base scoop followed by the lift-and-exit towards the transfer: (T + n_exit + hold_steps, 9).
 
     From the scoop's last pose the spoon travels horizontally along `direction_xy` until its centre
     is `distance` from the bowl's axis, rising by `rise`, at an average `speed` (m/s, eased in and
-    out like the expert's keyframes), keeping its orientation; then it holds still for
+    out like the expert's keyframes), rolling by `tilt` radians about the direction of travel on
+    the same easing (0 keeps the scoop's orientation); then it holds still, tilted, for
     `hold_steps` actions so that food sliding off the spoon lands before the trial ends. Food that
     falls off once the spoon is past the rim lands on the table, which is the spillage a real
-    scoop-and-transfer causes when the spoon is overloaded or tilted.
+    scoop-and-transfer causes when the spoon is overloaded or tilted. The tilt is what makes the
+    upcoming motion, not only the state at its start, decide whether a chunk spills.
     """
     base = as_pose9(base)
     d = np.asarray(direction_xy, dtype=np.float64)
@@ -74,6 +77,11 @@ def append_exit(
     exit_[:n, :2] = last[:2] + np.outer(u * s_end, d)
     exit_[:n, 2] = last[2] + u * rise
     exit_[n:, :3] = exit_[n - 1, :3]
+    if tilt:
+        axis = np.array([d[0], d[1], 0.0])
+        start = rot6d_to_matrix(last[3:9])
+        angles = np.concatenate([u, np.ones(hold_steps)]) * tilt
+        exit_[:, 3:9] = matrix_to_rot6d(axis_angle_matrix(axis, angles) @ start)
     return np.concatenate([base, exit_], axis=0)
 
 

@@ -1,11 +1,15 @@
 """Spillage trial trajectories: feasible shifts that keep what they can, the exit towards the transfer, seeds as data."""
 
 import numpy as np
+import pytest
 
 from grits_lab.config import config_from_dict
 
 from grits_lab.data.spillage import SpillageConfig, _sim_config, expert_mean_trajectory, make_trial_spec, source_bowl_region
 from grits_lab.data.trajectories import append_exit, shift_trajectory
+from grits_lab.errors import ConfigError
+from grits_lab.geometry import rot6d_to_matrix
+from grits_lab.runners.work import WorkerContext, execute_spec, resolve_work_path
 from grits_lab.sim.shapes import BowlGeometry
 
 BOWL = BowlGeometry()
@@ -54,6 +58,53 @@ def test_exit_leaves_the_bowl_at_the_requested_speed_and_holds():
     assert len(slow) > len(out)
 
 
+def test_a_tilted_exit_rolls_the_spoon_about_its_direction_of_travel_and_holds_the_roll():
+    base, center = _base_and_center()
+    direction = np.array([-0.15, 0.38])
+    level = append_exit(base, center, direction, 0.14, 0.02, 0.5, 5, 10.0)
+    tilted = append_exit(base, center, direction, 0.14, 0.02, 0.5, 5, 10.0, tilt=np.deg2rad(30.0))
+    np.testing.assert_array_equal(tilted[:, :3], level[:, :3])  # same path, only the orientation differs
+    np.testing.assert_array_equal(tilted[: len(base)], base)
+    start = rot6d_to_matrix(base[-1, 3:9])
+    relative = rot6d_to_matrix(tilted[len(base):, 3:9]) @ start.T  # the roll added at each exit step
+    angles = np.degrees(np.arccos(np.clip((np.trace(relative, axis1=1, axis2=2) - 1) / 2, -1, 1)))
+    assert np.all(np.diff(angles) >= -1e-6) and abs(angles[-1] - 30.0) < 1e-4
+    np.testing.assert_allclose(angles[-5:], 30.0, atol=1e-4)  # held tilted while falling food lands
+    axis = relative[-1] @ np.array([0.0, 0.0, 1.0]) - np.array([0.0, 0.0, 1.0])
+    travel = np.array([direction[0], direction[1], 0.0]) / np.linalg.norm(direction)
+    assert abs(axis @ travel) < 1e-9  # a roll about the travel direction moves 'up' only across it
+
+
+def test_exit_tilts_are_drawn_per_trial_within_range_with_either_sign():
+    config = config_from_dict(SpillageConfig, {"exit": {"tilt_deg": [10.0, 40.0]}})
+    sim, bowl, base = _sim_config(config), source_bowl_region(config), expert_mean_trajectory(config)
+    tilts = np.array([make_trial_spec(config, sim, base, bowl, "cube", k).params["trial"].exit_tilt_deg for k in range(30)])
+    assert np.all((np.abs(tilts) >= 10.0) & (np.abs(tilts) <= 40.0))
+    assert (tilts > 0).any() and (tilts < 0).any()
+    assert tilts[3] == make_trial_spec(config, sim, base, bowl, "cube", 3).params["trial"].exit_tilt_deg
+
+
+def _run_candidate(tilt_deg: float) -> dict:
+    config = config_from_dict(SpillageConfig, {
+        "particles": {"layers": [3, 6]}, "shift": {"x": 0.0, "y": 0.0, "z": 0.0},
+        "exit": {"tilt_deg": [tilt_deg, tilt_deg], "speed": [0.4, 0.4]}, "raw_cloud": False, "cloud": {"n_points": 64},
+    })
+    spec = make_trial_spec(config, _sim_config(config), expert_mean_trajectory(config), source_bowl_region(config), "cone", 0)
+    ctx = WorkerContext()
+    try:
+        result = execute_spec(spec.replace(work=resolve_work_path(spec.work)), ctx)
+    finally:
+        ctx.close()
+    assert result.ok, result.traceback
+    return result.payload["meta"]
+
+
+def test_a_level_exit_keeps_the_food_and_a_tipped_exit_spills_it():
+    level, tipped = _run_candidate(0.0), _run_candidate(45.0)
+    assert level["scooped"] >= 5 and level["spilled"] == 0 and level["label"] == 0
+    assert tipped["spilled"] >= 5 and tipped["label"] == 1
+
+
 def test_trial_specs_are_data_of_their_seed_and_end_outside_the_bowl():
     config = SpillageConfig()
     sim, bowl = _sim_config(config), source_bowl_region(config)
@@ -68,5 +119,8 @@ def test_trial_specs_are_data_of_their_seed_and_end_outside_the_bowl():
     assert min(speeds) >= config.exit.speed[0] and max(speeds) <= config.exit.speed[1]
     end = a.trajectory[-1, :2] - bowl["center"][:2]
     assert np.linalg.norm(end) > BOWL.outer_radius
+    bad = {"exit": {"tilt_deg": [30.0, 10.0]}}
+    with pytest.raises(ConfigError, match="exit.tilt_deg"):
+        config_from_dict(SpillageConfig, bad)
     off = config_from_dict(SpillageConfig, {"exit": {"enabled": False}})
     assert len(make_trial_spec(off, sim, base, bowl, "cone", 3).trajectory) == len(base)
