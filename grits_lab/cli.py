@@ -23,6 +23,7 @@ COMMAND_MODULES = [
     "grits_lab.tune.commands",
     "grits_lab.report.commands",
     "grits_lab.evaluation.commands",
+    "grits_lab.spillage.compare_commands",
 ]
 
 # Modules that register `grits-lab train <what>` subcommands.

@@ -199,6 +199,11 @@ class SpillageChunkDataset(IterableDataset):
         rng.shuffle(buffer)  # type: ignore[arg-type]
         yield from buffer
 
+    def sample_episodes(self) -> np.ndarray:
+        """The episode file of every sample in the unshuffled order (reads only the label arrays)."""
+        counts = [len(read_episode(self.dataset_dir / f, keys=["chunk_spilled"])[0]["chunk_spilled"]) for f in self.files]
+        return np.repeat(np.asarray(self.files, dtype=object), counts)
+
     def labels(self) -> np.ndarray:
         """Every sample's label in the unshuffled order (reads only the label arrays)."""
         out = [read_episode(self.dataset_dir / f, keys=["chunk_spilled"])[0]["chunk_spilled"].astype(bool) for f in self.files]

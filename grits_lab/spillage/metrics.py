@@ -62,3 +62,38 @@ def _check(prob_spill: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.n
     if p.shape != y.shape:
         raise ValueError(f"probabilities {p.shape} and labels {y.shape} differ in length")
     return p, y
+
+
+METRICS = {"auroc": auroc, "accuracy": accuracy}
+
+
+def paired_bootstrap(
+    probs: dict[str, np.ndarray],
+    labels: np.ndarray,
+    groups: np.ndarray,
+    n_resamples: int = 2000,
+    seed: int = 0,
+    metrics: tuple[str, ...] = ("auroc", "accuracy"),
+) -> dict[str, dict[str, np.ndarray]]:
+    """Each metric of each model on the same `n_resamples` resamples of whole groups (episodes).
+
+    Chunks of one episode share its food and its start, so they are not independent: resampling
+    episodes, not chunks, gives honest intervals, and scoring every model on the same resample
+    makes the differences between models paired (their common noise cancels). Returns
+    `{metric: {model: (n_resamples,) values}}`; a resample with one class only gives NaN AUROC.
+    """
+    labels = np.asarray(labels).reshape(-1)
+    groups = np.asarray(groups).reshape(-1)
+    for name, p in probs.items():
+        if np.asarray(p).shape != labels.shape:
+            raise ValueError(f"model {name!r}: {np.asarray(p).shape} probabilities for {labels.shape} labels")
+    _, group_of = np.unique(groups, return_inverse=True)
+    members = [np.flatnonzero(group_of == g) for g in range(group_of.max() + 1)] if len(groups) else []
+    rng = np.random.default_rng(seed)
+    out = {m: {name: np.empty(n_resamples) for name in probs} for m in metrics}
+    for r in range(n_resamples):
+        idx = np.concatenate([members[g] for g in rng.integers(len(members), size=len(members))])
+        for name, p in probs.items():
+            for m in metrics:
+                out[m][name][r] = METRICS[m](np.asarray(p)[idx], labels[idx])
+    return out

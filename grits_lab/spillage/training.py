@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 import torch
 import yaml
 from torch.utils.data import DataLoader
@@ -145,14 +146,19 @@ def train_predictor(config: PredictorConfig, restart: bool = False, progress: bo
     return {"run_dir": str(out), "best_checkpoint": str(best_path), "last_checkpoint": str(last_path), "best_epoch": best}
 
 
-def evaluate_predictor(predictor: TrainedPredictor, dataset_dir: str | Path, files: list[str] | None = None, n_bins: int = 10) -> dict[str, Any]:
-    """Accuracy, AUROC, ECE and loss of a trained predictor on every chunk of a (held-out) spillage dataset."""
+def predict_chunks(predictor: TrainedPredictor, dataset_dir: str | Path, files: list[str] | None = None) -> tuple[pd.DataFrame, float]:
+    """P(spill) of a trained predictor for every chunk of a spillage dataset, and the mean cross-entropy.
+
+    One row per chunk: `episode` (the episode file, the unit a paired bootstrap resamples),
+    `chunk` (its index within the episode), `label` and `p_spill`. The order and the point
+    subsets are fixed by the predictor's seed, so two calls give the same frame.
+    """
     dataset_dir = Path(dataset_dir)
     index = check_spillage_dataset(dataset_dir)
     cfg = predictor.config
     dataset = SpillageChunkDataset(
         dataset_dir,
-        sorted(index["file"].tolist()) if files is None else files,
+        sorted(index["file"].tolist()) if files is None else list(files),
         cloud_key=CLOUD_KEYS[cfg.data.cloud_source],
         chunk_len=cfg.model.chunk_len,
         action_normalizer=predictor.action_normalizer,
@@ -163,4 +169,17 @@ def evaluate_predictor(predictor: TrainedPredictor, dataset_dir: str | Path, fil
         cache=False,
     )
     p, y, loss = predict(predictor.model, dataset)
-    return {"dataset": str(dataset_dir), "loss": loss, **classification_report(p, y, n_bins)}
+    episodes = pd.Series(dataset.sample_episodes(), dtype=str)
+    frame = pd.DataFrame({
+        "episode": episodes,
+        "chunk": episodes.groupby(episodes, sort=False).cumcount().astype(np.int32),
+        "label": y.astype(np.int8),
+        "p_spill": p,
+    })
+    return frame, loss
+
+
+def evaluate_predictor(predictor: TrainedPredictor, dataset_dir: str | Path, files: list[str] | None = None, n_bins: int = 10) -> dict[str, Any]:
+    """Accuracy, AUROC, ECE and loss of a trained predictor on every chunk of a (held-out) spillage dataset."""
+    frame, loss = predict_chunks(predictor, dataset_dir, files)
+    return {"dataset": str(dataset_dir), "loss": loss, **classification_report(frame["p_spill"].to_numpy(), frame["label"].to_numpy(), n_bins)}

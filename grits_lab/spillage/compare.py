@@ -1,0 +1,142 @@
+"""Held-out comparison of trained spillage predictors, with paired episode-bootstrap intervals.
+
+The question the predictor's evidence has to answer is not "how good is each model" but "does
+the full model beat the ablations and the baselines on data it never saw", so every model is
+scored on the same chunks, the intervals come from resampling whole episodes, and each model's
+difference to the reference (the first one) is computed on the same resamples.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from grits_lab.errors import InputError
+from grits_lab.io import atomic_path, ensure_writable_dir, save_parquet_atomic, write_json_atomic, write_text_atomic
+from grits_lab.spillage.metrics import classification_report, paired_bootstrap
+
+
+@dataclass
+class Comparison:
+    table: pd.DataFrame  # one row per model: metrics, intervals, difference to the reference
+    predictions: pd.DataFrame  # one row per chunk: episode, chunk, label, p_<model>...
+    reference: str
+    n_resamples: int
+
+
+def compare_predictions(predictions: pd.DataFrame, models: list[str], n_resamples: int = 2000, seed: int = 0, n_bins: int = 10) -> Comparison:
+    """Table of AUROC / accuracy / ECE with 95 % intervals and paired differences to `models[0]`."""
+    if not models:
+        raise InputError("no predictors to compare")
+    labels = predictions["label"].to_numpy()
+    probs = {m: predictions[f"p_{m}"].to_numpy() for m in models}
+    boot = paired_bootstrap(probs, labels, predictions["episode"].to_numpy(), n_resamples=n_resamples, seed=seed)
+    reference = models[0]
+    point = {m: classification_report(probs[m], labels, n_bins) for m in models}
+    rows = []
+    for m in models:
+        row: dict[str, Any] = {"model": m, **point[m]}
+        for metric in ("auroc", "accuracy"):
+            row[f"{metric}_lo"], row[f"{metric}_hi"] = (float(v) for v in np.nanpercentile(boot[metric][m], [2.5, 97.5]))
+            if m == reference:
+                continue
+            key = f"{reference}_minus_{metric}"
+            diff = boot[metric][reference] - boot[metric][m]
+            diff = diff[~np.isnan(diff)]
+            row[key] = point[reference][metric] - point[m][metric]
+            row[f"{key}_lo"], row[f"{key}_hi"] = (float(v) for v in np.percentile(diff, [2.5, 97.5]))
+            row[f"{key}_p"] = float(np.mean(diff <= 0))  # share of resamples where the reference is not better
+        rows.append(row)
+    return Comparison(pd.DataFrame(rows), predictions, reference, n_resamples)
+
+
+def predict_all(checkpoints: dict[str, Path], dataset_dir: str | Path) -> pd.DataFrame:
+    """Every checkpoint's P(spill) on every chunk of `dataset_dir`, side by side (checks they align)."""
+    from grits_lab.spillage.checkpoint import load_predictor
+    from grits_lab.spillage.training import predict_chunks
+
+    merged: pd.DataFrame | None = None
+    for name, path in checkpoints.items():
+        frame, _ = predict_chunks(load_predictor(path), dataset_dir)
+        frame = frame.rename(columns={"p_spill": f"p_{name}"})
+        if merged is None:
+            merged = frame
+        elif not (merged[["episode", "chunk", "label"]].to_numpy() == frame[["episode", "chunk", "label"]].to_numpy()).all():
+            raise InputError(f"predictor {name!r} saw different chunks of {dataset_dir} than the others (chunk_len differs?)")
+        else:
+            merged[f"p_{name}"] = frame[f"p_{name}"].to_numpy()
+    assert merged is not None
+    return merged
+
+
+def comparison_markdown(c: Comparison, dataset: str) -> str:
+    ref = c.reference
+    n_eps = c.predictions["episode"].nunique()
+    lines = [
+        f"# Spillage predictors on {dataset}",
+        "",
+        f"{len(c.predictions)} chunks from {n_eps} episodes, spill rate {c.predictions['label'].mean():.3f}. "
+        f"95 % intervals from {c.n_resamples} paired bootstrap resamples of whole episodes; "
+        f"differences are {ref} minus the row's model (p: share of resamples in which {ref} is not better).",
+        "",
+        f"| model | AUROC [95 %] | accuracy [95 %] | ECE | {ref} − AUROC [95 %] (p) | {ref} − accuracy [95 %] (p) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in c.table.to_dict("records"):
+        cells = [
+            r["model"],
+            f"{r['auroc']:.3f} [{r['auroc_lo']:.3f}, {r['auroc_hi']:.3f}]",
+            f"{r['accuracy']:.3f} [{r['accuracy_lo']:.3f}, {r['accuracy_hi']:.3f}]",
+            f"{r['ece']:.3f}",
+        ]
+        for metric in ("auroc", "accuracy"):
+            key = f"{ref}_minus_{metric}"
+            cells.append("reference" if r["model"] == ref else f"{r[key]:+.3f} [{r[key + '_lo']:+.3f}, {r[key + '_hi']:+.3f}] ({r[key + '_p']:.3f})")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_comparison(c: Comparison, path: Path) -> None:
+    """ROC curves and reliability diagrams of every model, side by side."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    y = c.predictions["label"].to_numpy().astype(bool)
+    fig, (roc, rel) = plt.subplots(1, 2, figsize=(10, 4.5))
+    for r in c.table.to_dict("records"):
+        p = c.predictions[f"p_{r['model']}"].to_numpy()
+        order = np.argsort(-p, kind="mergesort")
+        tpr = np.concatenate([[0.0], np.cumsum(y[order]) / max(y.sum(), 1)])
+        fpr = np.concatenate([[0.0], np.cumsum(~y[order]) / max((~y).sum(), 1)])
+        roc.plot(fpr, tpr, label=f"{r['model']} ({r['auroc']:.3f})")
+        bins = np.clip((p * 10).astype(int), 0, 9)
+        filled = [b for b in range(10) if (bins == b).any()]
+        rel.plot([p[bins == b].mean() for b in filled], [y[bins == b].mean() for b in filled], marker="o", label=f"{r['model']} (ECE {r['ece']:.3f})")
+    roc.plot([0, 1], [0, 1], color="grey", lw=0.8, ls="--")
+    roc.set(xlabel="false positive rate", ylabel="true positive rate", title="ROC (AUROC)")
+    rel.plot([0, 1], [0, 1], color="grey", lw=0.8, ls="--")
+    rel.set(xlabel="mean P(spill) in bin", ylabel="spill rate in bin", title="reliability")
+    roc.legend(fontsize=8, loc="lower right")
+    rel.legend(fontsize=8, loc="upper left")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+
+
+def write_comparison(c: Comparison, dataset: str, out_dir: str | Path) -> list[Path]:
+    """predictor_comparison.{md,csv,json,png} and the per-chunk predictions (Parquet), atomically."""
+    out = ensure_writable_dir(Path(out_dir))
+    files = [out / "predictor_comparison.md", out / "predictor_comparison.csv", out / "predictor_comparison.json", out / "predictor_comparison.png", out / "predictions.parquet"]
+    write_text_atomic(files[0], comparison_markdown(c, dataset))
+    write_text_atomic(files[1], c.table.to_csv(index=False))
+    write_json_atomic(files[2], {"dataset": dataset, "reference": c.reference, "n_resamples": c.n_resamples, "models": c.table.to_dict("records")})
+    plot_comparison(c, files[3])
+    save_parquet_atomic(files[4], c.predictions)
+    return files

@@ -1,0 +1,81 @@
+"""Held-out comparison of predictors: paired episode bootstrap, table values, the CLI end to end."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from grits_lab.cli import main
+from grits_lab.spillage.compare import compare_predictions
+from grits_lab.spillage.metrics import auroc, classification_report, paired_bootstrap
+
+
+def _predictions(n_episodes=40, chunks=6, seed=0):
+    rng = np.random.default_rng(seed)
+    episode = np.repeat([f"ep_{e:03d}" for e in range(n_episodes)], chunks)
+    label = rng.integers(0, 2, len(episode))
+    good = np.clip(label * 0.6 + rng.uniform(0, 0.4, len(label)), 0, 1)  # separates the classes perfectly
+    noise = rng.uniform(0, 1, len(label))  # knows nothing
+    return pd.DataFrame({"episode": episode, "chunk": np.tile(np.arange(chunks), n_episodes), "label": label, "p_good": good, "p_noise": noise})
+
+
+def test_identical_models_differ_by_exactly_zero_in_every_resample():
+    frame = _predictions()
+    p = frame["p_noise"].to_numpy()
+    boot = paired_bootstrap({"a": p, "b": p.copy()}, frame["label"], frame["episode"], n_resamples=200)
+    np.testing.assert_array_equal(boot["auroc"]["a"], boot["auroc"]["b"])
+    assert boot["auroc"]["a"].std() > 0  # the resamples do differ
+
+
+def test_resamples_draw_whole_episodes():
+    # right on every chunk of even episodes, wrong on every chunk of odd ones: a resample of whole
+    # episodes scores a multiple of 1/10, one of single chunks would mostly not
+    episodes = np.repeat(np.arange(10), 5)
+    labels = np.ones(50, dtype=int)
+    p = (episodes % 2 == 0).astype(float)
+    acc = paired_bootstrap({"m": p}, labels, episodes, n_resamples=300, metrics=("accuracy",))["accuracy"]["m"]
+    np.testing.assert_allclose(acc * 10, np.round(acc * 10), atol=1e-9)
+    assert len(np.unique(acc)) > 3
+
+
+def test_table_holds_the_point_metrics_and_a_significant_paired_difference():
+    frame = _predictions()
+    c = compare_predictions(frame, ["good", "noise"], n_resamples=500)
+    rows = c.table.set_index("model")
+    y = frame["label"].to_numpy()
+    assert rows.loc["good", "auroc"] == 1.0 == auroc(frame["p_good"], y)
+    assert rows.loc["noise", "ece"] == pytest.approx(classification_report(frame["p_noise"], y)["ece"])
+    assert rows.loc["noise", "good_minus_auroc"] == pytest.approx(1.0 - auroc(frame["p_noise"], y))
+    assert rows.loc["noise", "good_minus_auroc_lo"] > 0.3 and rows.loc["noise", "good_minus_auroc_p"] == 0.0
+    assert rows.loc["noise", "auroc_lo"] < rows.loc["noise", "auroc"] < rows.loc["noise", "auroc_hi"]
+
+
+def test_cli_compares_trained_predictors_and_refuses_an_untrained_one(tmp_path, tiny_dataset, capsys):
+    paths = []
+    for name, inputs in (("full", "trajectory_and_cloud"), ("traj", "trajectory")):
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(yaml.safe_dump({
+            "name": name, "output_dir": str(tmp_path / "runs"),
+            "model": {"inputs": inputs, "dp3": {"hidden_dims": [16], "out_dim": 16}},
+            "data": {"dataset": str(tiny_dataset)}, "train": {"epochs": 1, "batch_size": 16, "num_threads": 1},
+        }))
+        paths.append(str(path))
+    assert main(["train", "predictor", paths[0], "--no-progress"]) == 0
+    capsys.readouterr()
+    assert main(["compare-predictors", *paths, "--eval", str(tiny_dataset)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "traj.yaml" in err[0] and "train it first" in err[0]
+    assert main(["train", "predictor", paths[1], "--no-progress"]) == 0
+    out = tmp_path / "cmp"
+    assert main(["compare-predictors", *paths, "--eval", str(tiny_dataset), "--out", str(out), "--bootstrap", "200"]) == 0
+    summary = json.loads((out / "predictor_comparison.json").read_text())
+    assert [m["model"] for m in summary["models"]] == ["full", "traj"] and summary["reference"] == "full"
+    predictions = pd.read_parquet(out / "predictions.parquet")
+    assert list(predictions.columns) == ["episode", "chunk", "label", "p_full", "p_traj"]
+    assert len(predictions) == 12 * 3 and predictions.groupby("episode")["chunk"].max().eq(2).all()
+    assert (out / "predictor_comparison.png").stat().st_size > 10_000
+    assert "full − AUROC" in (out / "predictor_comparison.md").read_text()
