@@ -70,3 +70,13 @@ def test_fingerprint_changes_with_values_only():
     a, b = OuterConfig(), OuterConfig()
     assert config_fingerprint(a) == config_fingerprint(b)
     assert config_fingerprint(a) != config_fingerprint(OuterConfig(name="y"))
+
+
+def test_the_command_line_parser_imports_no_simulator_torch_or_ray():
+    # `grits-lab --help` and one-line config errors should not wait seconds for heavy imports
+    import subprocess
+    import sys
+
+    code = "import sys; from grits_lab.cli import build_parser; build_parser(); print(sorted(m for m in ('pybullet', 'torch', 'ray', 'open3d') if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert out == "[]"

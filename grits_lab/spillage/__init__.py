@@ -1,21 +1,10 @@
 """The spillage predictor f_spillage(A_t, P_t) -> P(spill): encoders, model, training and the guidance objective."""
 
-from grits_lab.spillage.checkpoint import TrainedPredictor, load_predictor, save_checkpoint
-from grits_lab.spillage.config import PredictorConfig, PredictorDataConfig, PredictorModelConfig, PredictorTrainConfig
-from grits_lab.spillage.guidance import SpillageObjective, policy_to_predictor_affine, to_predictor_space
-from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
+from grits_lab.lazy import lazy_exports
 
-__all__ = [
-    "CloudNormalizer",
-    "PredictorConfig",
-    "PredictorDataConfig",
-    "PredictorModelConfig",
-    "PredictorTrainConfig",
-    "SpillageObjective",
-    "SpillagePredictor",
-    "TrainedPredictor",
-    "load_predictor",
-    "policy_to_predictor_affine",
-    "save_checkpoint",
-    "to_predictor_space",
-]
+__getattr__, __dir__, __all__ = lazy_exports(__name__, {
+    "checkpoint": ["TrainedPredictor", "load_predictor", "save_checkpoint"],
+    "config": ["PredictorConfig", "PredictorDataConfig", "PredictorModelConfig", "PredictorTrainConfig"],
+    "guidance": ["SpillageObjective", "policy_to_predictor_affine", "to_predictor_space"],
+    "model": ["CloudNormalizer", "SpillagePredictor"],
+})

@@ -1,6 +1,8 @@
 """Behavior cloning baseline: observation encoder features -> MLP -> the next action chunk (deterministic regression)."""
 
-from grits_lab.policies.bc.configuration_bc import BCConfig
-from grits_lab.policies.bc.modeling_bc import BCPolicy
+from grits_lab.lazy import lazy_exports
 
-__all__ = ["BCConfig", "BCPolicy"]
+__getattr__, __dir__, __all__ = lazy_exports(__name__, {
+    "configuration_bc": ["BCConfig"],
+    "modeling_bc": ["BCPolicy"],
+})
