@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 from pathlib import Path
 
@@ -90,3 +91,25 @@ def test_unwritable_directory_gives_clear_error(tmp_path):
         ensure_writable_dir(target)
     with pytest.raises(StorageError, match="cannot write"):
         write_text_atomic(target / "f.txt", "x")
+
+
+@pytest.fixture
+def full_disk(monkeypatch):
+    """The file system runs out of space: data reaches the page cache, fsync reports ENOSPC (as on ext4)."""
+
+    def fsync(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "fsync", fsync)
+
+
+def test_a_full_disk_is_one_clear_error_and_leaves_the_previous_file_intact(tmp_path, full_disk):
+    target = tmp_path / "summary.json"
+    target.write_text("previous")
+    with pytest.raises(StorageError, match=f"no space left on device while writing {target}"):
+        write_text_atomic(target, "new contents")
+    assert target.read_text() == "previous"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["summary.json"]  # no temporary file left behind
+    with pytest.raises(StorageError, match="no space left on device"):
+        write_episode(tmp_path, "ep_a", {"x": np.zeros(3)}, {})
+    assert not (tmp_path / "episodes" / "ep_a.npz").exists()

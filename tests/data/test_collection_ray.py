@@ -1,12 +1,16 @@
 """Real simulated episodes on Ray workers give exactly the serial executor's records (one Ray per module)."""
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 ray = pytest.importorskip("ray")
 
 from grits_lab.config import config_from_dict  # noqa: E402
-from grits_lab.data.jobs import base_trajectory  # noqa: E402
+from grits_lab.data.format import list_episode_files, read_episode  # noqa: E402
+from grits_lab.data.jobs import base_trajectory, run_collection  # noqa: E402
 from grits_lab.data.spillage import SpillageConfig, _sim_config, make_trial_spec, source_bowl_region  # noqa: E402
 from grits_lab.runners import SerialExecutor  # noqa: E402
 from grits_lab.runners.ray_executor import RayExecutor  # noqa: E402
@@ -45,3 +49,26 @@ def test_serial_and_ray_give_identical_simulated_records():
         for key, value in r.payload["arrays"].items():
             np.testing.assert_array_equal(parallel[eid].payload["arrays"][key], value, err_msg=f"{eid}:{key}")
     assert len({r.worker for r in parallel.values()}) == 2
+
+
+def test_a_worker_killed_during_collect_loses_and_duplicates_nothing(tmp_path, kill_a_worker_mid_episode):
+    data = {
+        "kind": "spillage", "trials": 4, "spill_fraction": 0.0, "shapes": ["sphere", "cube"], "particles": {"layers": [1, 1]},
+        "cloud": {"n_points": 64, "cad_surface_samples": 500}, "sim": {"cameras": CAMERAS}, "exit": {"enabled": False},
+        "raw_cloud": False,
+    }
+    serial = config_from_dict(SpillageConfig, {**data, "output": str(tmp_path / "serial"), "executor": {"backend": "serial"}})
+    ray_cfg = config_from_dict(SpillageConfig, {**data, "output": str(tmp_path / "ray"), "executor": {"backend": "ray", "workers": 2}})
+    run_collection(serial, progress=False)
+    summary = run_collection(ray_cfg, progress=False)
+    assert len(kill_a_worker_mid_episode) == 1
+    assert summary["candidates_failed"] == 0
+    expected = {p.name: read_episode(p) for p in list_episode_files(serial.output)}
+    got = {p.name: read_episode(p) for p in list_episode_files(ray_cfg.output)}
+    assert sorted(got) == sorted(expected) and len(got) == 4
+    for name, (arrays, meta) in expected.items():
+        assert got[name][1] == meta
+        for key in arrays:
+            np.testing.assert_array_equal(got[name][0][key], arrays[key], err_msg=f"{name}:{key}")
+    logged = [json.loads(line)["id"] for line in (Path(ray_cfg.output) / "candidates.jsonl").read_text().splitlines()]
+    assert len(logged) == len(set(logged))  # every candidate decided once

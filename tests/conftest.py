@@ -1,0 +1,31 @@
+"""Fixtures shared across test packages."""
+
+from __future__ import annotations
+
+import os
+import signal
+
+import pytest
+
+
+@pytest.fixture
+def kill_a_worker_mid_episode(monkeypatch):
+    """SIGKILL one Ray worker at the first poll that finds episodes running: a real lost process.
+
+    Patches `RayExecutor.poll`, so it reaches executors that jobs build themselves (collect,
+    evaluate). Yields the list of killed pids (one entry once the kill happened).
+    """
+    from grits_lab.runners.ray_executor import RayExecutor
+
+    killed: list[int] = []
+    original = RayExecutor.poll
+
+    def poll(self, timeout=None):
+        if not killed and self._in_flight:
+            pid = self.worker_pids()[0]
+            os.kill(pid, signal.SIGKILL)
+            killed.append(pid)
+        return original(self, timeout)
+
+    monkeypatch.setattr(RayExecutor, "poll", poll)
+    yield killed
