@@ -1,9 +1,9 @@
 """Spillage dataset: shifted mean-expert trajectories over random primitive foods, labelled by simulation, balanced.
 
-A candidate trial (shape, k) draws its particle parameters, its trajectory shift and the speed of
-its exit from the bowl from its own seed, as well as how far the spoon rolls on that exit, runs the base scoop followed by the lift-and-exit towards
-the transfer (food falling off the spoon outside the bowl is spillage), and records the spilled
-count at every waypoint. The trajectory is cut into chunks of `chunk_len` waypoints (the policy's n_action_steps); each chunk stores the composite
+A candidate trial (shape, k) draws its particle parameters, its trajectory shift, the speed of its
+exit from the bowl and how far the spoon rolls once outside it from its own seed, runs the base
+scoop followed by the lift-and-exit (food falling off the spoon outside the bowl is spillage, as
+on the way to a transfer), and records the spilled count at every waypoint. The trajectory is cut into chunks of `chunk_len` waypoints (the policy's n_action_steps); each chunk stores the composite
 and raw clouds observed at its start and whether the spilled count rose during it (contract 4).
 The label is 1 if any chunk spilled. Candidates are accepted in index order per shape until every
 (shape, label) bucket is full (`grits_lab.data.balance`); the acceptance rate is reported.
@@ -63,25 +63,32 @@ class ShiftConfig:
 
 @dataclass
 class ExitConfig:
-    # The lift-and-exit after the scoop: the spoon leaves the bowl towards the target workspace
-    # (where the transfer goes), so food that falls off the spoon outside the bowl is spillage.
+    # The lift-and-exit after the scoop: the spoon leaves the bowl as it would on the way to a
+    # transfer, so food that falls off the spoon outside the bowl is spillage.
     enabled: bool = True
     distance: float = 0.14  # spoon centre this far from the bowl axis at the end (outer rim: 8.6 cm)
     rise: float = 0.02  # metres gained on the way out
     # Average exit speed (m/s, eased in and out), drawn per trial: a brisk exit sheds a loaded
     # spoon's top layer, a slow one keeps it, so the speed is part of what decides the label.
     speed: tuple[float, float] = (0.25, 0.8)
-    # Roll of the spoon about its direction of travel during the exit (degrees, magnitude drawn
-    # per trial, sign random): how far the spoon tips decides whether its load slides off, and
-    # only the trajectory carries it, so the predictor has to read the trajectory, not just the
-    # cloud at the chunk's start. (0, 0) exits level.
+    # Roll of the spoon about its direction of travel once it is outside the bowl (degrees,
+    # magnitude drawn per trial, sign random), over `tilt_steps` actions: how far the spoon tips
+    # decides whether its load slides off, and only the trajectory carries it, so the predictor
+    # has to read the trajectory, not just the cloud at the chunk's start. (0, 0) stays level.
     tilt_deg: tuple[float, float] = (0.0, 50.0)
+    tilt_steps: int = 6
+    # Direction of the exit in the table plane, degrees from the world +x axis (away from the
+    # robot). Not towards the target workspace: with the scoop's orientation the arm cannot reach
+    # that way (every exit waypoint failed IK, so the spoon froze over the bowl); 0 degrees is
+    # reachable for every shift and tilt of the default ranges.
+    direction_deg: float = 0.0
     hold_steps: int = 5  # actions holding still at the end so falling food lands
 
     def __post_init__(self) -> None:
         require(self.distance > 0, "exit.distance", self.distance, "positive")
         require(0 < self.speed[0] <= self.speed[1], "exit.speed", list(self.speed), "a range [low, high] with 0 < low <= high")
         require(0 <= self.tilt_deg[0] <= self.tilt_deg[1] <= 90, "exit.tilt_deg", list(self.tilt_deg), "a range [low, high] with 0 <= low <= high <= 90")
+        require(self.tilt_steps >= 1, "exit.tilt_steps", self.tilt_steps, "at least 1")
         require(self.hold_steps >= 0, "exit.hold_steps", self.hold_steps, "non-negative")
 
 
@@ -210,10 +217,10 @@ def make_trial_spec(config: SpillageConfig, sim: Any, base: np.ndarray, bowl: di
         exit_speed = float(make_rng(derive_seed(seed, "exit")).uniform(*e.speed))
         tilt_rng = make_rng(derive_seed(seed, "exit-tilt"))
         exit_tilt = float(tilt_rng.uniform(*e.tilt_deg) * tilt_rng.choice([-1.0, 1.0]))
-        direction = np.asarray(sim.target_workspace_center, dtype=np.float64) - np.asarray(bowl["center"][:2])
+        direction = np.array([np.cos(np.deg2rad(e.direction_deg)), np.sin(np.deg2rad(e.direction_deg))])
         base = append_exit(
             base, bowl["center"], direction, e.distance, e.rise, exit_speed, e.hold_steps, sim.control_hz,
-            tilt=np.deg2rad(exit_tilt),
+            tilt=np.deg2rad(exit_tilt), tilt_steps=e.tilt_steps,
         )
     rng = make_rng(derive_seed(seed, "shift"))
     s = config.shift

@@ -51,17 +51,19 @@ def append_exit(
     hold_steps: int,
     control_hz: float,
     tilt: float = 0.0,
+    tilt_steps: int = 0,
 ) -> np.ndarray:
-    """The base scoop followed by the lift-and-exit towards the transfer: (T + n_exit + hold_steps, 9).
+    """The base scoop followed by the lift-and-exit towards the transfer: (T + n_exit + tilt_steps + hold_steps, 9).
 
     From the scoop's last pose the spoon travels horizontally along `direction_xy` until its centre
     is `distance` from the bowl's axis, rising by `rise`, at an average `speed` (m/s, eased in and
-    out like the expert's keyframes), rolling by `tilt` radians about the direction of travel on
-    the same easing (0 keeps the scoop's orientation); then it holds still, tilted, for
-    `hold_steps` actions so that food sliding off the spoon lands before the trial ends. Food that
-    falls off once the spoon is past the rim lands on the table, which is the spillage a real
-    scoop-and-transfer causes when the spoon is overloaded or tilted. The tilt is what makes the
-    upcoming motion, not only the state at its start, decide whether a chunk spills.
+    out like the expert's keyframes), keeping the scoop's orientation; there, outside the bowl, it
+    rolls by `tilt` radians about the direction of travel over `tilt_steps` actions (eased), and
+    then holds still for `hold_steps` actions so that food sliding off the spoon lands before the
+    trial ends. Food that falls off past the rim lands on the table: the spillage a real
+    scoop-and-transfer causes when the spoon is overloaded, jerked or tipped. The roll happens
+    outside the bowl so that what it sheds counts (a roll over the bowl would return food to it);
+    it is what makes the upcoming motion, not only the state at a chunk's start, decide a label.
     """
     base = as_pose9(base)
     d = np.asarray(direction_xy, dtype=np.float64)
@@ -73,15 +75,15 @@ def append_exit(
     s_end = -b + float(np.sqrt(max(b * b - (rel @ rel - distance**2), 0.0)))
     n = max(1, int(np.ceil(s_end / speed * control_hz)))
     u = 0.5 - 0.5 * np.cos(np.pi * np.arange(1, n + 1) / n)
-    exit_ = np.repeat(last[None], n + hold_steps, axis=0)
+    exit_ = np.repeat(last[None], n + tilt_steps + hold_steps, axis=0)
     exit_[:n, :2] = last[:2] + np.outer(u * s_end, d)
     exit_[:n, 2] = last[2] + u * rise
     exit_[n:, :3] = exit_[n - 1, :3]
-    if tilt:
+    if tilt and tilt_steps:
+        roll = 0.5 - 0.5 * np.cos(np.pi * np.arange(1, tilt_steps + 1) / tilt_steps)
+        angles = np.concatenate([np.zeros(n), roll, np.ones(hold_steps)]) * tilt
         axis = np.array([d[0], d[1], 0.0])
-        start = rot6d_to_matrix(last[3:9])
-        angles = np.concatenate([u, np.ones(hold_steps)]) * tilt
-        exit_[:, 3:9] = matrix_to_rot6d(axis_angle_matrix(axis, angles) @ start)
+        exit_[:, 3:9] = matrix_to_rot6d(axis_angle_matrix(axis, angles) @ rot6d_to_matrix(last[3:9]))
     return np.concatenate([base, exit_], axis=0)
 
 

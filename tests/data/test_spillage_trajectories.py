@@ -58,18 +58,21 @@ def test_exit_leaves_the_bowl_at_the_requested_speed_and_holds():
     assert len(slow) > len(out)
 
 
-def test_a_tilted_exit_rolls_the_spoon_about_its_direction_of_travel_and_holds_the_roll():
+def test_a_tilted_exit_rolls_the_spoon_outside_the_bowl_about_its_direction_of_travel_and_holds_the_roll():
     base, center = _base_and_center()
     direction = np.array([-0.15, 0.38])
     level = append_exit(base, center, direction, 0.14, 0.02, 0.5, 5, 10.0)
-    tilted = append_exit(base, center, direction, 0.14, 0.02, 0.5, 5, 10.0, tilt=np.deg2rad(30.0))
-    np.testing.assert_array_equal(tilted[:, :3], level[:, :3])  # same path, only the orientation differs
-    np.testing.assert_array_equal(tilted[: len(base)], base)
+    tilted = append_exit(base, center, direction, 0.14, 0.02, 0.5, 5, 10.0, tilt=np.deg2rad(30.0), tilt_steps=6)
+    assert len(tilted) == len(level) + 6
+    np.testing.assert_allclose(tilted[: len(level) - 5], level[:-5], atol=1e-9)  # the same path out, level
+    np.testing.assert_array_equal(tilted[len(level) - 5:, :3], np.repeat(level[-1:, :3], 11, axis=0))  # rolls in place
     start = rot6d_to_matrix(base[-1, 3:9])
-    relative = rot6d_to_matrix(tilted[len(base):, 3:9]) @ start.T  # the roll added at each exit step
+    relative = rot6d_to_matrix(tilted[len(level) - 5:, 3:9]) @ start.T  # the roll added at each step
     angles = np.degrees(np.arccos(np.clip((np.trace(relative, axis1=1, axis2=2) - 1) / 2, -1, 1)))
-    assert np.all(np.diff(angles) >= -1e-6) and abs(angles[-1] - 30.0) < 1e-4
+    assert np.all(np.diff(angles) >= -1e-6) and 0 < angles[0] < 30.0
     np.testing.assert_allclose(angles[-5:], 30.0, atol=1e-4)  # held tilted while falling food lands
+    r = np.linalg.norm(tilted[len(level) - 5:, :2] - center[:2], axis=1)
+    assert np.all(r > BOWL.outer_radius)  # what the roll sheds falls outside the bowl
     axis = relative[-1] @ np.array([0.0, 0.0, 1.0]) - np.array([0.0, 0.0, 1.0])
     travel = np.array([direction[0], direction[1], 0.0]) / np.linalg.norm(direction)
     assert abs(axis @ travel) < 1e-9  # a roll about the travel direction moves 'up' only across it
@@ -89,7 +92,7 @@ def _run_candidate(tilt_deg: float) -> dict:
         "particles": {"layers": [3, 6]}, "shift": {"x": 0.0, "y": 0.0, "z": 0.0},
         "exit": {"tilt_deg": [tilt_deg, tilt_deg], "speed": [0.4, 0.4]}, "raw_cloud": False, "cloud": {"n_points": 64},
     })
-    spec = make_trial_spec(config, _sim_config(config), expert_mean_trajectory(config), source_bowl_region(config), "cone", 0)
+    spec = make_trial_spec(config, _sim_config(config), expert_mean_trajectory(config), source_bowl_region(config), "sphere", 0)
     ctx = WorkerContext()
     try:
         result = execute_spec(spec.replace(work=resolve_work_path(spec.work)), ctx)
@@ -101,8 +104,30 @@ def _run_candidate(tilt_deg: float) -> dict:
 
 def test_a_level_exit_keeps_the_food_and_a_tipped_exit_spills_it():
     level, tipped = _run_candidate(0.0), _run_candidate(45.0)
+    assert level["ik_failures"] == 0 and tipped["ik_failures"] == 0  # the spoon really goes where the trial says
     assert level["scooped"] >= 5 and level["spilled"] == 0 and level["label"] == 0
     assert tipped["spilled"] >= 5 and tipped["label"] == 1
+
+
+def test_the_default_exit_is_reachable_at_the_extremes_of_shift_and_tilt():
+    from grits_lab.sim.env import ScoopEnv
+
+    config = SpillageConfig()
+    sim, bowl, base = _sim_config(config), source_bowl_region(config), expert_mean_trajectory(config)
+    e = config.exit
+    direction = np.array([np.cos(np.deg2rad(e.direction_deg)), np.sin(np.deg2rad(e.direction_deg))])
+    env = ScoopEnv(sim)
+    try:
+        for dz, tilt in [(-config.shift.z, e.tilt_deg[1]), (config.shift.z, -e.tilt_deg[1])]:
+            shifted = base.copy()
+            shifted[10:, 2] += dz
+            traj = append_exit(shifted, bowl["center"], direction, e.distance, e.rise, e.speed[1], e.hold_steps, sim.control_hz,
+                               tilt=np.deg2rad(tilt), tilt_steps=e.tilt_steps)
+            env.reset(seed=0)
+            failures = [t for t, a in enumerate(traj) if env.step(a)[4]["ik_failure"]]
+            assert failures == [], (dz, tilt, failures)
+    finally:
+        env.close()
 
 
 def test_trial_specs_are_data_of_their_seed_and_end_outside_the_bowl():
