@@ -76,8 +76,11 @@ def time_pipeline(timeout: float) -> dict:
     seconds = round(time.perf_counter() - start, 1)
     state_path = out / "pipeline_state.json"
     stages = json.loads(state_path.read_text()) if state_path.exists() else {}
-    return {"status": "ok" if proc.returncode == 0 else "failed", "seconds": seconds,
-            "stage_seconds": {k: v.get("seconds") for k, v in stages.items()}}
+    result = {"status": "ok" if proc.returncode == 0 else "failed", "seconds": seconds,
+              "stage_seconds": {k: v.get("seconds") for k, v in stages.items()}}
+    if proc.returncode != 0:
+        result["error"] = "\n".join((proc.stderr or proc.stdout).strip().splitlines()[-5:])
+    return result
 
 
 def _median(values: list) -> float | None:

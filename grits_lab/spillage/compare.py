@@ -136,7 +136,8 @@ def write_comparison(c: Comparison, dataset: str, out_dir: str | Path) -> list[P
     files = [out / "predictor_comparison.md", out / "predictor_comparison.csv", out / "predictor_comparison.json", out / "predictor_comparison.png", out / "predictions.parquet"]
     write_text_atomic(files[0], comparison_markdown(c, dataset))
     write_text_atomic(files[1], c.table.to_csv(index=False))
-    write_json_atomic(files[2], {"dataset": dataset, "reference": c.reference, "n_resamples": c.n_resamples, "models": c.table.to_dict("records")})
+    models = [{k: v for k, v in row.items() if not (isinstance(v, float) and np.isnan(v))} for row in c.table.to_dict("records")]
+    write_json_atomic(files[2], {"dataset": dataset, "reference": c.reference, "n_resamples": c.n_resamples, "models": models})
     plot_comparison(c, files[3])
     save_parquet_atomic(files[4], c.predictions)
     return files
