@@ -18,7 +18,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("config", help="evaluation config, e.g. experiments/evaluate_quick.yaml")
     parser.add_argument("--override", metavar="YAML", default=None,
-                        help="YAML merged over the config, e.g. a sweep's best.yaml with `guidance: {rho: ..., s: ...}`")
+                        help="YAML merged over the config (any of its keys), e.g. a sweep's best.yaml with `guidance: {rho: ..., s: ...}`")
     parser.add_argument("--methods", nargs="+", default=None, help="evaluate only these methods (default: the config's)")
     parser.add_argument("--output-dir", default=None, help="run directory (default: the config's output_dir)")
     parser.add_argument("--serial", action="store_true", help="run in this process instead of on Ray")
@@ -37,8 +37,8 @@ def _run(args: argparse.Namespace) -> int:
         from grits_lab.errors import ConfigError
 
         raise ConfigError(f"{args.override}: `guidance` must be a mapping like {{rho: 2.5, s: 30}}")
-    # A sweep's best.yaml may hold more than the guidance: only `guidance` is taken from such a file.
-    overrides = {k: v for k, v in overrides.items() if k in ("guidance", "posthoc")} if args.override else {}
+    # Every key of the file is merged over the config (and validated with it: an unknown key is
+    # one error naming it); the command-line flags below win over the file.
     if args.methods:
         overrides["methods"] = list(args.methods)
     if args.output_dir:

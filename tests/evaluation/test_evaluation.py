@@ -119,3 +119,23 @@ def test_rule_based_scoops_and_transfers_a_training_food(models, tmp_path):
     assert row["scoop_success"] and row["scooped"] >= 1
     assert row["transferred"] >= 1 and row["target_locate_error_m"] < 0.02
     assert row["task_success"] == (row["spilled_total"] == 0 and row["transferred"] >= 1)
+
+
+def test_cli_override_file_sets_any_key_and_an_unknown_key_is_one_error(models, tmp_path, capsys):
+    import yaml
+
+    from grits_lab.cli import main
+    from grits_lab.config import config_to_dict
+
+    base = tmp_path / "evaluate.yaml"
+    base.write_text(yaml.safe_dump(config_to_dict(eval_config(models, tmp_path / "base", methods=["dp", "bc"], trials=3))))
+    override = tmp_path / "override.yaml"
+    override.write_text(yaml.safe_dump({"methods": ["rule_based"], "trials": 1, "output_dir": str(tmp_path / "run")}))
+    assert main(["evaluate", str(base), "--override", str(override), "--serial", "--no-progress"]) == 0
+    records = pd.read_parquet(tmp_path / "run" / "episodes.parquet")
+    assert list(records["method"]) == ["rule_based"]
+    capsys.readouterr()
+    override.write_text("trails: 2\n")
+    assert main(["evaluate", str(base), "--override", str(override), "--serial"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "trails" in err[0]
