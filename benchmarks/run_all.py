@@ -26,6 +26,8 @@ import sys
 import time
 from pathlib import Path
 
+from grits_lab.io import write_text_atomic
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 
@@ -176,8 +178,8 @@ def main() -> int:
     if args.with_pipeline:
         print("running the quickstart pipeline", file=sys.stderr, flush=True)
         summary["benchmarks"]["pipeline"] = time_pipeline(args.timeout * 2)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
-    (out / "summary.md").write_text(markdown(summary))
+    write_text_atomic(out / "summary.json", json.dumps(summary, indent=2, default=str) + "\n")
+    write_text_atomic(out / "summary.md", markdown(summary))
     print(markdown(summary))
     return 0 if all(b.get("status") == "ok" for b in summary["benchmarks"].values()) else 1
 
