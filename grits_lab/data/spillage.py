@@ -91,6 +91,11 @@ class ExitConfig:
         require(self.tilt_steps >= 1, "exit.tilt_steps", self.tilt_steps, "at least 1")
         require(self.hold_steps >= 0, "exit.hold_steps", self.hold_steps, "non-negative")
 
+    def direction_xy(self) -> np.ndarray:
+        """Unit vector of the exit in the table plane."""
+        angle = np.deg2rad(self.direction_deg)
+        return np.array([np.cos(angle), np.sin(angle)])
+
 
 @dataclass
 class SpillageConfig:
@@ -217,9 +222,8 @@ def make_trial_spec(config: SpillageConfig, sim: Any, base: np.ndarray, bowl: di
         exit_speed = float(make_rng(derive_seed(seed, "exit")).uniform(*e.speed))
         tilt_rng = make_rng(derive_seed(seed, "exit-tilt"))
         exit_tilt = float(tilt_rng.uniform(*e.tilt_deg) * tilt_rng.choice([-1.0, 1.0]))
-        direction = np.array([np.cos(np.deg2rad(e.direction_deg)), np.sin(np.deg2rad(e.direction_deg))])
         base = append_exit(
-            base, bowl["center"], direction, e.distance, e.rise, exit_speed, e.hold_steps, sim.control_hz,
+            base, bowl["center"], e.direction_xy(), e.distance, e.rise, exit_speed, e.hold_steps, sim.control_hz,
             tilt=np.deg2rad(exit_tilt), tilt_steps=e.tilt_steps,
         )
     rng = make_rng(derive_seed(seed, "shift"))

@@ -41,6 +41,11 @@ def mean_trajectory(trajectories: Sequence[np.ndarray], length: int | None = Non
     return mean
 
 
+def _ease(n: int) -> np.ndarray:
+    """Progress 0 -> 1 over `n` steps (values after each step), cosine-eased in and out."""
+    return 0.5 - 0.5 * np.cos(np.pi * np.arange(1, n + 1) / n)
+
+
 def append_exit(
     base: np.ndarray,
     bowl_center: np.ndarray,
@@ -53,7 +58,7 @@ def append_exit(
     tilt: float = 0.0,
     tilt_steps: int = 0,
 ) -> np.ndarray:
-    """The base scoop followed by the lift-and-exit towards the transfer: (T + n_exit + tilt_steps + hold_steps, 9).
+    """The base scoop followed by the lift-and-exit: (T + n_exit + tilt_steps + hold_steps, 9).
 
     From the scoop's last pose the spoon travels horizontally along `direction_xy` until its centre
     is `distance` from the bowl's axis, rising by `rise`, at an average `speed` (m/s, eased in and
@@ -74,14 +79,13 @@ def append_exit(
     b = float(rel @ d)
     s_end = -b + float(np.sqrt(max(b * b - (rel @ rel - distance**2), 0.0)))
     n = max(1, int(np.ceil(s_end / speed * control_hz)))
-    u = 0.5 - 0.5 * np.cos(np.pi * np.arange(1, n + 1) / n)
+    u = _ease(n)
     exit_ = np.repeat(last[None], n + tilt_steps + hold_steps, axis=0)
     exit_[:n, :2] = last[:2] + np.outer(u * s_end, d)
     exit_[:n, 2] = last[2] + u * rise
     exit_[n:, :3] = exit_[n - 1, :3]
     if tilt and tilt_steps:
-        roll = 0.5 - 0.5 * np.cos(np.pi * np.arange(1, tilt_steps + 1) / tilt_steps)
-        angles = np.concatenate([np.zeros(n), roll, np.ones(hold_steps)]) * tilt
+        angles = np.concatenate([np.zeros(n), _ease(tilt_steps), np.ones(hold_steps)]) * tilt
         axis = np.array([d[0], d[1], 0.0])
         exit_[:, 3:9] = matrix_to_rot6d(axis_angle_matrix(axis, angles) @ rot6d_to_matrix(last[3:9]))
     return np.concatenate([base, exit_], axis=0)

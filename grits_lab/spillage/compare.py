@@ -17,7 +17,7 @@ import pandas as pd
 
 from grits_lab.errors import InputError
 from grits_lab.io import atomic_path, ensure_writable_dir, save_parquet_atomic, write_json_atomic, write_text_atomic
-from grits_lab.spillage.metrics import classification_report, paired_bootstrap
+from grits_lab.spillage.metrics import classification_report, paired_bootstrap, reliability_bins
 
 
 @dataclass
@@ -26,6 +26,7 @@ class Comparison:
     predictions: pd.DataFrame  # one row per chunk: episode, chunk, label, p_<model>...
     reference: str
     n_resamples: int
+    n_bins: int = 10  # reliability bins, as for the ECE in the table
 
 
 def compare_predictions(predictions: pd.DataFrame, models: list[str], n_resamples: int = 2000, seed: int = 0, n_bins: int = 10) -> Comparison:
@@ -51,7 +52,7 @@ def compare_predictions(predictions: pd.DataFrame, models: list[str], n_resample
             row[f"{key}_lo"], row[f"{key}_hi"] = (float(v) for v in np.percentile(diff, [2.5, 97.5]))
             row[f"{key}_p"] = float(np.mean(diff <= 0))  # share of resamples where the reference is not better
         rows.append(row)
-    return Comparison(pd.DataFrame(rows), predictions, reference, n_resamples)
+    return Comparison(pd.DataFrame(rows), predictions, reference, n_resamples, n_bins)
 
 
 def predict_all(checkpoints: dict[str, Path], dataset_dir: str | Path) -> pd.DataFrame:
@@ -65,7 +66,7 @@ def predict_all(checkpoints: dict[str, Path], dataset_dir: str | Path) -> pd.Dat
         frame = frame.rename(columns={"p_spill": f"p_{name}"})
         if merged is None:
             merged = frame
-        elif not (merged[["episode", "chunk", "label"]].to_numpy() == frame[["episode", "chunk", "label"]].to_numpy()).all():
+        elif not merged[["episode", "chunk", "label"]].equals(frame[["episode", "chunk", "label"]]):
             raise InputError(f"predictor {name!r} saw different chunks of {dataset_dir} than the others (chunk_len differs?)")
         else:
             merged[f"p_{name}"] = frame[f"p_{name}"].to_numpy()
@@ -115,9 +116,8 @@ def plot_comparison(c: Comparison, path: Path) -> None:
         tpr = np.concatenate([[0.0], np.cumsum(y[order]) / max(y.sum(), 1)])
         fpr = np.concatenate([[0.0], np.cumsum(~y[order]) / max((~y).sum(), 1)])
         roc.plot(fpr, tpr, label=f"{r['model']} ({r['auroc']:.3f})")
-        bins = np.clip((p * 10).astype(int), 0, 9)
-        filled = [b for b in range(10) if (bins == b).any()]
-        rel.plot([p[bins == b].mean() for b in filled], [y[bins == b].mean() for b in filled], marker="o", label=f"{r['model']} (ECE {r['ece']:.3f})")
+        mean_p, rate, _ = reliability_bins(p, y, c.n_bins)
+        rel.plot(mean_p, rate, marker="o", label=f"{r['model']} (ECE {r['ece']:.3f})")
     roc.plot([0, 1], [0, 1], color="grey", lw=0.8, ls="--")
     roc.set(xlabel="false positive rate", ylabel="true positive rate", title="ROC (AUROC)")
     rel.plot([0, 1], [0, 1], color="grey", lw=0.8, ls="--")

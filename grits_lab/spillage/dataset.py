@@ -199,12 +199,15 @@ class SpillageChunkDataset(IterableDataset):
         rng.shuffle(buffer)  # type: ignore[arg-type]
         yield from buffer
 
+    def _chunk_labels(self) -> list[np.ndarray]:
+        """Each file's chunk labels, in file order (reads only the label arrays)."""
+        return [read_episode(self.dataset_dir / f, keys=["chunk_spilled"])[0]["chunk_spilled"].astype(bool) for f in self.files]
+
     def sample_episodes(self) -> np.ndarray:
-        """The episode file of every sample in the unshuffled order (reads only the label arrays)."""
-        counts = [len(read_episode(self.dataset_dir / f, keys=["chunk_spilled"])[0]["chunk_spilled"]) for f in self.files]
-        return np.repeat(np.asarray(self.files, dtype=object), counts)
+        """The episode file of every sample in the unshuffled order."""
+        return np.repeat(np.asarray(self.files, dtype=object), [len(c) for c in self._chunk_labels()])
 
     def labels(self) -> np.ndarray:
-        """Every sample's label in the unshuffled order (reads only the label arrays)."""
-        out = [read_episode(self.dataset_dir / f, keys=["chunk_spilled"])[0]["chunk_spilled"].astype(bool) for f in self.files]
+        """Every sample's label in the unshuffled order."""
+        out = self._chunk_labels()
         return np.concatenate(out) if out else np.zeros(0, dtype=bool)

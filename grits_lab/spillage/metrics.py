@@ -31,18 +31,23 @@ def auroc(prob_spill: np.ndarray, labels: np.ndarray) -> float:
     return float((ranks[pos].sum() - n_pos * (n_pos + 1) / 2.0) / (n_pos * n_neg))
 
 
+def reliability_bins(prob_spill: np.ndarray, labels: np.ndarray, n_bins: int = 10) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per non-empty equal-width bin of P(spill): mean P(spill), spill rate and sample count."""
+    prob_spill, labels = _check(prob_spill, labels)
+    bins = np.clip((prob_spill * n_bins).astype(int), 0, n_bins - 1)
+    filled = [b for b in range(n_bins) if (bins == b).any()]
+    mean_p = np.array([prob_spill[bins == b].mean() for b in filled])
+    rate = np.array([labels[bins == b].mean() for b in filled])
+    count = np.array([int((bins == b).sum()) for b in filled])
+    return mean_p, rate, count
+
+
 def expected_calibration_error(prob_spill: np.ndarray, labels: np.ndarray, n_bins: int = 10) -> float:
     """sum_b |B_b|/n * |mean P(spill) in b - spill rate in b| over equal-width bins of P(spill)."""
-    prob_spill, labels = _check(prob_spill, labels)
-    if len(prob_spill) == 0:
+    mean_p, rate, count = reliability_bins(prob_spill, labels, n_bins)
+    if count.sum() == 0:
         return float("nan")
-    bins = np.clip((prob_spill * n_bins).astype(int), 0, n_bins - 1)
-    total = 0.0
-    for b in range(n_bins):
-        mask = bins == b
-        if mask.any():
-            total += mask.sum() * abs(prob_spill[mask].mean() - labels[mask].mean())
-    return float(total / len(prob_spill))
+    return float(np.sum(count * np.abs(mean_p - rate)) / count.sum())
 
 
 def classification_report(prob_spill: np.ndarray, labels: np.ndarray, n_bins: int = 10) -> dict[str, float]:
@@ -84,9 +89,10 @@ def paired_bootstrap(
     """
     labels = np.asarray(labels).reshape(-1)
     groups = np.asarray(groups).reshape(-1)
+    probs = {name: np.asarray(p, dtype=np.float64) for name, p in probs.items()}
     for name, p in probs.items():
-        if np.asarray(p).shape != labels.shape:
-            raise ValueError(f"model {name!r}: {np.asarray(p).shape} probabilities for {labels.shape} labels")
+        if p.shape != labels.shape:
+            raise ValueError(f"model {name!r}: {p.shape} probabilities for {labels.shape} labels")
     _, group_of = np.unique(groups, return_inverse=True)
     members = [np.flatnonzero(group_of == g) for g in range(group_of.max() + 1)] if len(groups) else []
     rng = np.random.default_rng(seed)
@@ -95,5 +101,5 @@ def paired_bootstrap(
         idx = np.concatenate([members[g] for g in rng.integers(len(members), size=len(members))])
         for name, p in probs.items():
             for m in metrics:
-                out[m][name][r] = METRICS[m](np.asarray(p)[idx], labels[idx])
+                out[m][name][r] = METRICS[m](p[idx], labels[idx])
     return out
