@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import signal
 
@@ -29,3 +30,13 @@ def kill_a_worker_mid_episode(monkeypatch):
 
     monkeypatch.setattr(RayExecutor, "poll", poll)
     yield killed
+
+
+@pytest.fixture
+def full_disk(monkeypatch):
+    """The file system runs out of space: data reaches the page cache, fsync reports ENOSPC (as on ext4)."""
+
+    def fsync(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "fsync", fsync)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import errno
 import os
 from pathlib import Path
 
@@ -91,16 +90,6 @@ def test_unwritable_directory_gives_clear_error(tmp_path):
         ensure_writable_dir(target)
     with pytest.raises(StorageError, match="cannot write"):
         write_text_atomic(target / "f.txt", "x")
-
-
-@pytest.fixture
-def full_disk(monkeypatch):
-    """The file system runs out of space: data reaches the page cache, fsync reports ENOSPC (as on ext4)."""
-
-    def fsync(fd):
-        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-
-    monkeypatch.setattr(os, "fsync", fsync)
 
 
 def test_a_full_disk_is_one_clear_error_and_leaves_the_previous_file_intact(tmp_path, full_disk):

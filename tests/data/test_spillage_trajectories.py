@@ -115,13 +115,12 @@ def test_the_default_exit_is_reachable_at_the_extremes_of_shift_and_tilt():
     config = SpillageConfig()
     sim, bowl, base = _sim_config(config), source_bowl_region(config), expert_mean_trajectory(config)
     e = config.exit
-    direction = np.array([np.cos(np.deg2rad(e.direction_deg)), np.sin(np.deg2rad(e.direction_deg))])
     env = ScoopEnv(sim)
     try:
         for dz, tilt in [(-config.shift.z, e.tilt_deg[1]), (config.shift.z, -e.tilt_deg[1])]:
             shifted = base.copy()
             shifted[10:, 2] += dz
-            traj = append_exit(shifted, bowl["center"], direction, e.distance, e.rise, e.speed[1], e.hold_steps, sim.control_hz,
+            traj = append_exit(shifted, bowl["center"], e.direction_xy(), e.distance, e.rise, e.speed[1], e.hold_steps, sim.control_hz,
                                tilt=np.deg2rad(tilt), tilt_steps=e.tilt_steps)
             env.reset(seed=0)
             failures = [t for t, a in enumerate(traj) if env.step(a)[4]["ik_failure"]]

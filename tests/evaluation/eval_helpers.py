@@ -5,6 +5,8 @@ from pathlib import Path
 from grits_lab.config import config_from_dict
 
 N_POINTS = 32  # points per object in the tiny test clouds
+# Record columns that measure time, which differ between otherwise identical runs.
+TIMING = ["wall_time_s", "scoop_time_s", "transfer_time_s", "plan_time_mean_s", "plan_time_max_s"]
 
 
 def eval_config(models: dict[str, str], tmp: Path, **changes):

@@ -6,12 +6,10 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
-from eval_helpers import eval_config  # noqa: E402
+from eval_helpers import TIMING, eval_config  # noqa: E402
 from grits_lab.evaluation.run import evaluate  # noqa: E402
 
 pytestmark = pytest.mark.ray
-
-TIMING = ["wall_time_s", "scoop_time_s", "transfer_time_s", "plan_time_mean_s", "plan_time_max_s"]
 
 
 def test_a_worker_killed_during_evaluate_loses_and_duplicates_nothing(models, tmp_path, kill_a_worker_mid_episode):

@@ -6,13 +6,11 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
-from eval_helpers import eval_config  # noqa: E402
+from eval_helpers import TIMING, eval_config  # noqa: E402
 from grits_lab.evaluation.run import evaluate  # noqa: E402
 from grits_lab.runners.ray_executor import RayExecutor  # noqa: E402
 
 pytestmark = [pytest.mark.ray, pytest.mark.slow]  # about a minute: Ray start-up and four episodes
-
-TIMING = ["wall_time_s", "scoop_time_s", "transfer_time_s", "plan_time_mean_s", "plan_time_max_s"]
 
 
 def test_ray_workers_give_the_serial_records(models, tmp_path):

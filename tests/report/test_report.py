@@ -181,14 +181,7 @@ def test_cli_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     assert err.count("\n") == 0 and "no episode records" in err and "other.parquet" in err
 
 
-def test_cli_on_a_full_disk_is_one_line_and_exit_2(built, tmp_path, monkeypatch, capsys):
-    import errno
-    import os
-
-    def fsync(fd):
-        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-
-    monkeypatch.setattr(os, "fsync", fsync)
+def test_cli_on_a_full_disk_is_one_line_and_exit_2(built, tmp_path, full_disk, capsys):
     run, _, _ = built
     assert main(["report", str(run), "--out", str(tmp_path / "report")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
