@@ -60,7 +60,9 @@ def run_scoop(env: Any, controller: Any, scene: EpisodeScene, history: ObsHistor
         plan_times.append(chunk.plan_time_s)
         if chunk.diagnostics:
             diagnostics.append(chunk.diagnostics)
-        if stops_when_still and steps >= settings.min_steps and is_still(chunk, history.ee_pose[-1], settings.still_tolerance):
+        # Compared with the last commanded pose, not the measured one: under a load the arm
+        # settles a few millimetres off its command, which is no motion the policy asks for.
+        if stops_when_still and steps >= settings.min_steps and is_still(chunk, last_action, settings.still_tolerance):
             stop_reason = "policy_holds"
             break
         actions = chunk.actions[: n_exec or len(chunk.actions)]
