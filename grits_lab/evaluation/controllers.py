@@ -35,18 +35,28 @@ class Chunk:
 
 
 class ObsHistory:
-    """Measured spoon poses (every step) and clouds (where rendered) of the current episode."""
+    """Measured spoon poses (every step), commanded actions and clouds (where rendered) of the current episode."""
 
     def __init__(self) -> None:
         self.ee_pose: list[np.ndarray] = []
+        self.actions: list[np.ndarray] = []  # actions[i] took the spoon from ee_pose[i] to ee_pose[i + 1]
         self.clouds: dict[int, np.ndarray] = {}
         self.rgbd: dict[int, np.ndarray] = {}
 
     def __len__(self) -> int:
         return len(self.ee_pose)
 
-    def append(self, obs: dict[str, Any]) -> None:
+    def append(self, obs: dict[str, Any], action: np.ndarray | None = None) -> None:
+        """The observation after `action` (None for the first observation of the episode)."""
+        if action is not None:
+            self.actions.append(np.asarray(action, dtype=np.float32))
         self.ee_pose.append(np.asarray(obs["ee_pose"], dtype=np.float32))
+
+    def past_actions(self, k: int) -> np.ndarray:
+        """(k, 9) the newest commanded actions; before the first, the first measured pose (the spoon at rest), as in training."""
+        rest = self.ee_pose[0]
+        out = [self.actions[i] if i >= 0 else rest for i in range(len(self.actions) - k, len(self.actions))]
+        return np.stack(out) if out else np.zeros((0, 9), dtype=np.float32)
 
     def poses(self, n: int) -> np.ndarray:
         """(n, 9) newest poses; before the first step the first pose repeats (robot at rest), as in training."""
@@ -86,6 +96,7 @@ class DiffusionController:
         cfg = policy.config
         self.n_obs_steps = cfg.n_obs_steps
         self.n_action_steps = cfg.n_action_steps
+        self.n_past_actions = cfg.n_past_actions
         kind = cfg.obs_encoder.kind
         self.obs_kind = kind
         self.cloud_steps = cfg.obs_encoder.cloud_steps if kind == "pointcloud" else 0
@@ -113,6 +124,8 @@ class DiffusionController:
             obs["cloud"] = history.stacked(history.clouds, self.n_obs_steps)
         elif self.obs_kind == "rgbd":
             obs["rgbd"] = history.stacked(history.rgbd, self.n_obs_steps)
+        if self.n_past_actions:
+            obs["past_action"] = history.past_actions(self.n_past_actions)
         return obs
 
     def plan(self, history: ObsHistory, scene: Any) -> Chunk:

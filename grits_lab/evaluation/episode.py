@@ -72,7 +72,7 @@ def run_scoop(env: Any, controller: Any, scene: EpisodeScene, history: ObsHistor
             last_action = action
             steps += 1
             scene.advance()
-            history.append(obs)
+            history.append(obs, action)
             remaining = len(actions) - i - 1
             if 0 < remaining < max(cloud_steps, image_steps):  # the history slots the next plan reads
                 observe()

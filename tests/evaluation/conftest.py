@@ -84,7 +84,8 @@ def models(tmp_path_factory) -> dict[str, str]:
     dp_cfg = config_from_dict(PolicyTrainConfig, {
         "dataset": str(demos), "output_dir": str(root / "dp"), "batch_size": 16, "max_steps": 40, "lr": 1e-3, "warmup_steps": 5,
         "val_fraction": 0.0, "log_every": 20, "checkpoint_every": 40, "num_threads": 1, "cache_points_per_object": N_POINTS,
-        "policy": {**policy, "unet": {"down_dims": [16, 32], "kernel_size": 3, "n_groups": 4, "diffusion_step_embed_dim": 16}},
+        "policy": {**policy, "inpaint_past_actions": True,  # the whole episode path with past-action conditioning
+                   "unet": {"down_dims": [16, 32], "kernel_size": 3, "n_groups": 4, "diffusion_step_embed_dim": 16}},
     })
     train_policy(dp_cfg, progress=False)
     bc_cfg = config_from_dict(BCTrainConfig, {

@@ -10,6 +10,7 @@ import pytest
 
 from eval_helpers import eval_config
 from grits_lab.errors import ConfigError
+from grits_lab.evaluation.controllers import ObsHistory
 from grits_lab.evaluation.methods import METHODS
 from grits_lab.evaluation.run import evaluate, evaluate_guidance
 from grits_lab.records import RECORD_COLUMNS
@@ -139,3 +140,14 @@ def test_cli_override_file_sets_any_key_and_an_unknown_key_is_one_error(models, 
     assert main(["evaluate", str(base), "--override", str(override), "--serial"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "trails" in err[0]
+
+
+def test_history_gives_the_commanded_actions_and_the_resting_pose_before_the_first():
+    history = ObsHistory()
+    rest = np.arange(9, dtype=np.float32)
+    history.append({"ee_pose": rest})
+    np.testing.assert_array_equal(history.past_actions(2), np.stack([rest, rest]))
+    command = rest + 1
+    history.append({"ee_pose": rest + 0.5}, command)  # the arm lags its command: the command is what was asked
+    np.testing.assert_array_equal(history.past_actions(2), np.stack([rest, command]))
+    assert history.past_actions(0).shape == (0, 9)

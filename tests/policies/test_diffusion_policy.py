@@ -49,8 +49,9 @@ def test_windows_pad_with_edge_values_and_align_obs_with_actions(demo_dataset):
     ds = DemoWindowDataset(demo_dataset, ["ep000"], cfg, cache_points_per_object=32, progress=False)
     actions = ds.episodes[0].arrays["action"]
     first = ds.window(0)
-    # at step 0 the history before the start repeats step 0
-    np.testing.assert_array_equal(first["action"][0, 0], actions[0])
+    # at step 0 the action before the start is the resting pose, the observation repeats step 0
+    np.testing.assert_array_equal(first["action"][0, 0], ds.episodes[0].arrays["ee_pose"][0])
+    np.testing.assert_array_equal(first["ee_pose"][0, 0], first["ee_pose"][0, 1])
     np.testing.assert_array_equal(first["action"][0, 1], actions[0])
     np.testing.assert_array_equal(first["action"][0, 2], actions[1])
     last = ds.window(len(ds) - 1)
@@ -138,6 +139,27 @@ def test_guided_sampler_plugs_in_and_rho_zero_matches_plain(demo_dataset, tmp_pa
     moved = policy.plan(obs, sampler=guided, objective=cost, generator=torch.Generator().manual_seed(1))
     assert len(moved.result.steps) == 6
     assert moved.actions[:, :, 2].mean() < plain.actions[:, :, 2].mean()
+
+
+def test_inpainting_holds_the_past_actions_and_the_chunk_continues_from_them(demo_dataset, tmp_path):
+    policy_cfg = {**TINY_POLICY, "n_obs_steps": 3, "inpaint_past_actions": True}
+    summary = train_policy(_train_config(demo_dataset, tmp_path / "run", policy=policy_cfg, max_steps=5, checkpoint_every=5), progress=False)
+    policy = DiffusionPolicy.load(summary["checkpoint"])
+    assert policy.config.n_past_actions == 2 and "past_action" in policy.obs_keys
+    ds = DemoWindowDataset(demo_dataset, ["ep002"], policy.config, cache_points_per_object=32, progress=False)
+    window = ds.window(7)
+    obs = {k: v[0] for k, v in window.items() if k != "action"}
+    obs["past_action"] = window["action"][0, :2]
+    plan = policy.plan(obs, generator=torch.Generator().manual_seed(1))
+    known = policy.action_normalizer.normalize(torch.from_numpy(obs["past_action"]).float())
+    torch.testing.assert_close(plan.trajectory_norm[0, :2], known)
+    # the executed chunk depends on the past actions it continues from
+    moved = dict(obs, past_action=obs["past_action"] + np.float32(0.02))
+    assert not np.array_equal(policy.plan(moved, generator=torch.Generator().manual_seed(1)).actions, plan.actions)
+    plain_cfg = config_from_dict(DiffusionPolicyConfig, {**policy_cfg, "inpaint_past_actions": False})
+    assert plain_cfg.n_past_actions == 0
+    with pytest.raises(InputError, match="past_action"):
+        policy.predict_action({k: v for k, v in obs.items() if k != "past_action"})
 
 
 def test_bad_inputs_fail_with_one_clear_error(demo_dataset, tmp_path):

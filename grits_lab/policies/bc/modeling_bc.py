@@ -20,19 +20,22 @@ from grits_lab.config import config_from_dict, config_to_dict
 from grits_lab.data.normalize import ActionNormalizer, MinMaxNormalizer
 from grits_lab.policies.bc.configuration_bc import BCConfig
 from grits_lab.policies.diffusion.encoders import PointCloudEncoder, RGBDEncoder
-from grits_lab.policies.diffusion.modeling_diffusion import DiffusionPolicy
+from grits_lab.policies.diffusion.modeling_diffusion import DiffusionPolicy, encoder_obs_keys
 
 
 class BCPolicy(nn.Module):
     # Observation handling shared with the diffusion policy (same attributes: config.n_obs_steps,
     # config.obs_encoder, obs_encoder, action_normalizer, cloud_normalizer).
-    obs_keys = DiffusionPolicy.obs_keys
     encode_obs = DiffusionPolicy.encode_obs
     _subsample_points = DiffusionPolicy._subsample_points
     obs_to_tensors = DiffusionPolicy.obs_to_tensors
     fit_normalizers = DiffusionPolicy.fit_normalizers
     normalizer_state = DiffusionPolicy.normalizer_state
     load_normalizer_state = DiffusionPolicy.load_normalizer_state
+
+    @property
+    def obs_keys(self) -> tuple[str, ...]:
+        return encoder_obs_keys(self.config)
 
     def __init__(self, config: BCConfig) -> None:
         super().__init__()

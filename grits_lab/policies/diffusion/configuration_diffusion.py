@@ -9,6 +9,9 @@ optional batch axis in front):
     rgbd     (n_obs, cams, 4, H, W) RGB + depth per camera (encoder kind "rgbd"): float with RGB in
                                    [0, 1] and depth in metres (the demonstration format), or all four
                                    channels uint8 (depth quantized over [0, depth_max])
+    past_action (n_obs - 1, 9)     the actions commanded at the previous n_obs - 1 steps, world
+                                   frame (only with `inpaint_past_actions`; before the first action,
+                                   the spoon's resting pose)
 """
 
 from __future__ import annotations
@@ -79,6 +82,12 @@ class DiffusionPolicyConfig:
     obs_encoder: ObsEncoderConfig = field(default_factory=ObsEncoderConfig)
     unet: UNetConfig = field(default_factory=UNetConfig)
     scheduler: DDIMConfig = field(default_factory=DDIMConfig)
+    # The first n_obs_steps - 1 entries of the horizon are actions already executed. When set,
+    # training feeds them to the U-Net clean (not noised, not in the loss) and planning holds them
+    # at the commanded values at every denoising step (Diffusion Policy's inpainting conditioning,
+    # applied to the past actions), so each new chunk continues from where the last one left the
+    # spoon instead of jumping to another demonstration's path at the chunk boundary.
+    inpaint_past_actions: bool = False
 
     def __post_init__(self) -> None:
         require(self.n_obs_steps >= 1, "n_obs_steps", self.n_obs_steps, "at least 1")
@@ -103,3 +112,8 @@ class DiffusionPolicyConfig:
     def action_start(self) -> int:
         """Index in the horizon of the first executed action (the current step)."""
         return self.n_obs_steps - 1
+
+    @property
+    def n_past_actions(self) -> int:
+        """How many executed actions each plan is conditioned on (0 without inpainting)."""
+        return self.action_start if self.inpaint_past_actions else 0

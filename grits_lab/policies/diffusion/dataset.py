@@ -7,7 +7,8 @@ cut to `cache_points_per_object` random points per object (fixed per episode and
 For a current step c of an episode with T steps, the window holds observations at
 c - n_obs_steps + 1 ... c and actions at c - n_obs_steps + 1 ... c - n_obs_steps + horizon;
 indices outside [0, T - 1] repeat the first or last entry (the robot at rest before the start
-and holding its final pose after the end), as Diffusion Policy's padded sampler does.
+and holding its final pose after the end), as Diffusion Policy's padded sampler does; an action
+before the start is the first measured pose, where the resting spoon was commanded to stay.
 """
 
 from __future__ import annotations
@@ -142,7 +143,11 @@ class DemoWindowDataset:
             ep = self.episodes[self.window_episode[i]]
             c = self.window_step[i]
             last = ep.length - 1
-            batch["action"].append(ep.arrays["action"][np.clip(c + act_offsets, 0, last)])
+            act_idx = c + act_offsets
+            actions = ep.arrays["action"][np.clip(act_idx, 0, last)]
+            if act_idx[0] < 0:  # before the first action the spoon rests where it started
+                actions[act_idx < 0] = ep.arrays["ee_pose"][0]
+            batch["action"].append(actions)
             obs_idx = np.clip(c + obs_offsets, 0, last)
             for key in self.keys[1:]:
                 batch[key].append(ep.arrays[key][obs_idx])

@@ -28,6 +28,12 @@ from grits_lab.policies.diffusion.unet import ConditionalUnet1D
 from grits_lab.sampling import DDIMSampler, DDIMScheduler, Objective, Sampler, SampleResult
 
 
+def encoder_obs_keys(config: Any) -> tuple[str, ...]:
+    """The observation keys the encoders read: the spoon pose and the encoder's sensor."""
+    kind = config.obs_encoder.kind
+    return ("ee_pose",) + (("cloud",) if kind == "pointcloud" else ("rgbd",) if kind == "rgbd" else ())
+
+
 @dataclass
 class Plan:
     """One planning call: executed actions (world frame), the whole normalized horizon, diagnostics."""
@@ -65,8 +71,7 @@ class DiffusionPolicy(nn.Module):
     # ------------------------------------------------------------------ normalizers
     @property
     def obs_keys(self) -> tuple[str, ...]:
-        kind = self.config.obs_encoder.kind
-        return ("ee_pose",) + (("cloud",) if kind == "pointcloud" else ("rgbd",) if kind == "rgbd" else ())
+        return encoder_obs_keys(self.config) + (("past_action",) if self.config.n_past_actions else ())
 
     def fit_normalizers(self, actions: np.ndarray, ee_poses: np.ndarray, cloud_points: np.ndarray | None = None) -> None:
         """Fit on training data: poses and actions share one range so both land in [-1, 1]."""
@@ -127,9 +132,11 @@ class DiffusionPolicy(nn.Module):
         noise = torch.randn(actions.shape, generator=generator, device=actions.device)
         t = torch.randint(0, self.config.scheduler.num_train_timesteps, (actions.shape[0],), generator=generator, device=actions.device)
         noisy = self.noise_scheduler.add_noise(actions, noise, t)
+        k = self.config.n_past_actions
+        noisy = _inpaint(noisy, actions[:, :k])
         pred = self.model(noisy, t, cond)
         target = noise if self.config.scheduler.prediction_type == "epsilon" else actions
-        return F.mse_loss(pred, target)
+        return F.mse_loss(pred[:, k:], target[:, k:])
 
     # ------------------------------------------------------------------ inference
     def plan(
@@ -146,9 +153,11 @@ class DiffusionPolicy(nn.Module):
         with torch.no_grad():
             cond = self.encode_obs(batch)
         model = self.model
-        denoise = lambda x, t: model(x, t, cond)
+        known = self.action_normalizer.normalize(batch["past_action"].float()) if self.config.n_past_actions else None
+        denoise = lambda x, t: model(_inpaint(x, known), t, cond)
         shape = (cond.shape[0], self.config.horizon, self.config.action_dim)
         result = (sampler or self.sampler).sample(denoise, shape, generator=generator, objective=objective, device=device)
+        result.sample = _inpaint(result.sample, known)
         start = self.config.action_start
         chunk = result.sample[:, start : start + self.config.n_action_steps]
         actions = self.action_normalizer.unnormalize(chunk.detach().double()).cpu().numpy().astype(np.float32)
@@ -207,3 +216,10 @@ class DiffusionPolicy(nn.Module):
         if use_ema and ckpt.get("ema") is not None:
             state["model"] = ckpt["ema"]["model"]
         return cls.from_policy_state(state, device)
+
+
+def _inpaint(trajectory: torch.Tensor, known: torch.Tensor | None) -> torch.Tensor:
+    """`trajectory` (B, H, D) with its first entries replaced by `known` (B, k, D); unchanged when k = 0."""
+    if known is None or known.shape[1] == 0:
+        return trajectory
+    return torch.cat([known.to(trajectory.dtype), trajectory[:, known.shape[1] :]], dim=1)
