@@ -78,6 +78,11 @@ class TransferSettings:
     enabled: bool = True
     clearance: float = 0.06  # metres the spoon keeps above the bowls' rims and the table on the way
     max_speed: float = 0.12  # m/s of the spoon while transferring (commands at the control rate)
+    level_steps: int = 10  # actions over which the lift turns the spoon level (one sudden turn swings the arm)
+    # "radial": on the way across, turn the spoon to point away from the robot's base over the
+    # target (the arm's natural posture there); "keep": keep the scoop's heading, which twists the
+    # wrist to its limit for targets off to the side.
+    heading: Literal["radial", "keep"] = "radial"
     pour_height: float = 0.05  # spoon centre above the target bowl's rim when pouring
     pour_angle_deg: float = 120.0  # roll of the spoon about its x axis to empty it
     pour_steps: int = 20
@@ -87,6 +92,7 @@ class TransferSettings:
         require(self.clearance > 0, "transfer.clearance", self.clearance, "positive")
         require(self.max_speed > 0, "transfer.max_speed", self.max_speed, "positive")
         require(self.pour_steps >= 1, "transfer.pour_steps", self.pour_steps, "at least 1")
+        require(self.level_steps >= 1, "transfer.level_steps", self.level_steps, "at least 1")
 
 
 @dataclass

@@ -132,7 +132,9 @@ def run_transfer(env: Any, scene: EpisodeScene, settings: Any) -> dict[str, Any]
     reach = math.hypot(spoon.half_length, spoon.half_width)
     current = matrix_to_pose9(scene.spoon_pose())
     max_step = settings.max_speed / env.config.control_hz
-    path = plan_transfer(current, target, obstacles, settings.clearance, settings.pour_height, max_step, reach)
+    # The robot's base stands at the world origin (grits_lab/sim/world.py): radial = away from it.
+    heading = math.atan2(target.centre[1], target.centre[0]) if settings.heading == "radial" else None
+    path = plan_transfer(current, target, obstacles, settings.clearance, settings.pour_height, max_step, reach, settings.level_steps, heading)
     for action in path:
         env.step(action)
         scene.advance()

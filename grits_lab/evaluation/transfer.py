@@ -7,8 +7,13 @@ the rim, which a circle fit handles, unlike a centroid of the visible points (bi
 cameras).
 
 The path keeps the spoon level (no tilt, so the load stays in it) and goes up, across and down:
-lift to a safe height above every obstacle's top (bowl rims, with `clearance`), travel in a
-straight line at that height, descend to the pour height above the target's rim. It is checked
+lift to a safe height above every obstacle's top (bowl rims, with `clearance`) while turning the
+spoon level over `level_steps` actions (the scoop ends tipped up; turning it level in one
+action asks the arm for a jump it answers by swinging to another elbow posture, which throws
+the load), travel in a
+straight line at that height (turning the spoon, level, to point away from the robot's base over
+the target when asked: keeping the scoop's heading twists the wrist to its joint limit for
+targets off to the side), descend to the pour height above the target's rim. It is checked
 against the obstacles' bounding cylinders before it is executed. The pour rolls the spoon about
 its own x axis above the target's centre, then the spoon holds still while the food settles.
 """
@@ -22,6 +27,7 @@ import numpy as np
 
 from grits_lab.errors import InputError
 from grits_lab.geometry import matrix_to_rot6d, rot6d_to_matrix
+from grits_lab.sim.env import interpolate_pose
 
 
 @dataclass
@@ -58,12 +64,13 @@ def locate_bowl(points: np.ndarray, table_height: float = 0.0, rim_band: float =
 
 def level_rotation(pose9: np.ndarray) -> np.ndarray:
     """(3, 3) the spoon held level (its z up) with the heading of `pose9` kept."""
-    rot = rot6d_to_matrix(np.asarray(pose9[3:9], dtype=np.float64))
-    heading = rot[:, 0].copy()
-    heading[2] = 0.0
-    if np.linalg.norm(heading) < 1e-6:
-        heading = np.array([1.0, 0.0, 0.0])
-    x = heading / np.linalg.norm(heading)
+    heading = rot6d_to_matrix(np.asarray(pose9[3:9], dtype=np.float64))[:2, 0]
+    return heading_rotation(math.atan2(heading[1], heading[0]) if np.linalg.norm(heading) > 1e-6 else 0.0)
+
+
+def heading_rotation(yaw: float) -> np.ndarray:
+    """(3, 3) the level spoon pointing along world heading `yaw` (radians)."""
+    x = np.array([math.cos(yaw), math.sin(yaw), 0.0])
     z = np.array([0.0, 0.0, 1.0])
     return np.stack([x, np.cross(z, x), z], axis=1)
 
@@ -72,9 +79,16 @@ def _pose(position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
     return np.concatenate([position, matrix_to_rot6d(rotation)]).astype(np.float32)
 
 
-def _line(a: np.ndarray, b: np.ndarray, rotation: np.ndarray, max_step: float) -> list[np.ndarray]:
-    n = max(1, int(math.ceil(np.linalg.norm(b - a) / max_step)))
-    return [_pose(a + (b - a) * (i / n), rotation) for i in range(1, n + 1)]
+def _line(a: np.ndarray, b: np.ndarray, rotation: np.ndarray, max_step: float, end_rotation: np.ndarray | None = None,
+          min_steps: int = 1) -> list[np.ndarray]:
+    """Waypoints from a to b (a excluded) at most `max_step` apart (and at least `min_steps` of them),
+    turning from `rotation` to `end_rotation` (slerp) on the way when it is given."""
+    n = max(min_steps, int(math.ceil(np.linalg.norm(b - a) / max_step)))
+    if end_rotation is None:
+        return [_pose(a + (b - a) * (i / n), rotation) for i in range(1, n + 1)]
+    m0, m1 = np.eye(4), np.eye(4)
+    m0[:3, :3], m1[:3, :3] = rotation, end_rotation
+    return [_pose(a + (b - a) * (i / n), interpolate_pose(m0, m1, i / n)[:3, :3]) for i in range(1, n + 1)]
 
 
 @dataclass
@@ -97,18 +111,21 @@ def path_is_clear(path: np.ndarray, obstacles: list[Obstacle], spoon_reach: floa
 
 
 def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], clearance: float,
-                  pour_height: float, max_step: float, spoon_reach: float) -> np.ndarray:
-    """(T, 9) level spoon path: up to a safe height, across, down to `pour_height` above the target's rim."""
+                  pour_height: float, max_step: float, spoon_reach: float, level_steps: int = 1,
+                  target_heading: float | None = None) -> np.ndarray:
+    """(T, 9) spoon path: up to a safe height while levelling over `level_steps` actions, across, down to
+    `pour_height` above the target's rim, level from the end of the lift on."""
     rotation = level_rotation(current)
     start = np.asarray(current[:3], dtype=np.float64)
     safe_z = max([start[2]] + [ob.top + clearance + spoon_reach for ob in obstacles])
     above_target = np.array([target.centre[0], target.centre[1], safe_z])
     pour_point = np.array([target.centre[0], target.centre[1], target.rim_height + pour_height])
-    waypoints = []
-    waypoints += _line(start, np.array([start[0], start[1], safe_z]), rotation, max_step)
+    tipped = rot6d_to_matrix(np.asarray(current[3:9], dtype=np.float64))
+    waypoints = _line(start, np.array([start[0], start[1], safe_z]), tipped, max_step, rotation, level_steps)
     lifted = len(waypoints) - 1  # the vertical lift leaves the source bowl by design
-    waypoints += _line(waypoints[-1][:3].astype(np.float64), above_target, rotation, max_step)
-    waypoints += _line(above_target, pour_point, rotation, max_step)
+    arrival = rotation if target_heading is None else heading_rotation(target_heading)
+    waypoints += _line(waypoints[-1][:3].astype(np.float64), above_target, rotation, max_step, arrival)
+    waypoints += _line(above_target, pour_point, arrival, max_step)
     path = np.stack(waypoints)
     # The lift starts in the source bowl and the descent ends in the target's cylinder by design:
     # check the way between them.

@@ -54,3 +54,30 @@ def test_transfer_path_goes_over_the_bowls_and_ends_above_the_target(env):
     low = start.copy()
     low[2] = src[2] + 0.02  # a straight line at this height would cut through the source bowl's wall
     assert not path_is_clear(np.stack([low, low + [0.2, 0, 0, 0, 0, 0, 0, 0, 0]]), obstacles[:1], 0.036)
+
+
+def _angles_deg(path: np.ndarray) -> np.ndarray:
+    from grits_lab.geometry import rot6d_to_matrix
+
+    rots = [rot6d_to_matrix(p[3:9].astype(np.float64)) for p in path]
+    return np.array([np.degrees(np.arccos(np.clip((np.trace(a.T @ b) - 1) / 2, -1, 1))) for a, b in zip(rots, rots[1:])])
+
+
+def test_a_tipped_spoon_is_levelled_gradually_and_arrives_pointing_away_from_the_robot():
+    from grits_lab.evaluation.transfer import BowlEstimate, heading_rotation
+    from grits_lab.geometry import matrix_to_rot6d, rot6d_to_matrix
+
+    tipped = np.array([[0.96, 0, -0.28], [0, 1, 0], [0.28, 0, 0.96]])  # ~16 degrees tip-up, as scoops end
+    tipped, _ = np.linalg.qr(tipped)
+    tipped *= np.sign(np.diag(tipped))
+    start = np.concatenate([[0.6, -0.1, 0.12], matrix_to_rot6d(tipped)]).astype(np.float32)
+    target = BowlEstimate(np.array([0.35, 0.35, 0.0]), 0.06, 0.05, 100, 0.0)
+    path = plan_transfer(start, target, [], clearance=0.04, pour_height=0.05, max_step=0.012, spoon_reach=0.036,
+                         level_steps=8, target_heading=np.arctan2(0.35, 0.35))
+    steps = _angles_deg(np.concatenate([start[None], path]))
+    assert steps[:8].max() < 16 / 8 + 0.5  # the tilt goes in eighths, not in one jump
+    final = rot6d_to_matrix(path[-1, 3:9].astype(np.float64))
+    np.testing.assert_allclose(final, heading_rotation(np.pi / 4), atol=1e-6)
+    np.testing.assert_allclose(final[:, 2], [0, 0, 1], atol=1e-6)  # level at the pour point
+    one_jump = plan_transfer(start, target, [], 0.04, 0.05, 0.012, 0.036)
+    assert _angles_deg(np.concatenate([start[None], one_jump]))[0] > 15
