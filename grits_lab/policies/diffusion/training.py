@@ -13,7 +13,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import torch
@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from grits_lab.config import config_fingerprint, config_to_dict, load_config, require
 from grits_lab.errors import StorageError
+from grits_lab.evaluation.rollouts import RolloutSettings
 from grits_lab.io import ensure_writable_dir, write_text_atomic
 from grits_lab.policies.diffusion.configuration_diffusion import DiffusionPolicyConfig
 from grits_lab.policies.diffusion.dataset import DemoWindowDataset, dataset_fingerprint, list_demo_episodes, split_episodes
@@ -55,7 +56,9 @@ class PolicyTrainConfig:
     val_batches: int = 8
     checkpoint_every: int = 500
     keep_every: int = 0  # also keep step_<N>.pt every N steps (0 = only last.pt)
-    rollout: Literal["none"] = "none"  # sim rollouts are done by the evaluation runner
+    # Every `rollout.every` steps (0 = never) play `rollout.episodes` scoops in the simulator with
+    # the EMA weights and log rollout_scoop_success / rollout_spillage (grits_lab/evaluation/rollouts.py).
+    rollout: RolloutSettings = field(default_factory=RolloutSettings)
 
     def __post_init__(self) -> None:
         require(self.batch_size >= 1, "batch_size", self.batch_size, "at least 1")
@@ -67,6 +70,8 @@ class PolicyTrainConfig:
             require(getattr(self, key) >= 1, key, getattr(self, key), "at least 1")
         require(self.keep_every >= 0, "keep_every", self.keep_every, "non-negative")
         require(self.num_threads >= 0, "num_threads", self.num_threads, "non-negative")
+        require(self.rollout.every % self.log_every == 0, "rollout.every", self.rollout.every,
+                f"a multiple of log_every={self.log_every} (rates are logged with the losses)")
 
 
 def load_train_config(path: str | Path) -> PolicyTrainConfig:
@@ -155,6 +160,14 @@ def train_policy(config: PolicyTrainConfig, max_steps: int | None = None, progre
         if config.keep_every and step % config.keep_every == 0:
             save_checkpoint(ckpt_dir / f"step_{step}.pt", state)
 
+    rollouts = None
+    if config.rollout.every:
+        from grits_lab.data.format import load_index
+        from grits_lab.evaluation.rollouts import ScoopRollouts, rollout_episodes
+
+        index = load_index(config.dataset)
+        pairs = [(r.food, r.level) for r in index.itertuples() if r.episode_id in set(train_ids)]
+        rollouts = ScoopRollouts(config.rollout, rollout_episodes(pairs, config.rollout.episodes, config.seed))
     logger = MetricLogger(out, resume_step=step)
     first_loss = last_loss = float("nan")
     window: list[float] = []
@@ -181,6 +194,8 @@ def train_policy(config: PolicyTrainConfig, max_steps: int | None = None, progre
                 values = {"train_loss": last_loss, "lr": scheduler.get_last_lr()[0], "steps_per_s": rate}
                 if val_set is not None and (step % config.val_every == 0 or step == total_steps):
                     values["val_loss"] = validation_loss(ema.model, val_set, config.val_batches, config.batch_size, config.seed, device)
+                if rollouts is not None and (step % config.rollout.every == 0 or step == total_steps):
+                    values.update(rollouts(ema.model))
                 logger.log(step, values)
                 bar.set_postfix({k: f"{v:.4g}" for k, v in values.items() if k != "lr"})
                 window = []
@@ -189,6 +204,8 @@ def train_policy(config: PolicyTrainConfig, max_steps: int | None = None, progre
     finally:
         bar.close()
         logger.close()
+        if rollouts is not None:
+            rollouts.close()
     elapsed = time.perf_counter() - started
     return {
         "output_dir": str(out),
