@@ -30,7 +30,6 @@ COMMAND_MODULES = [
 TRAIN_MODULES = [
     "grits_lab.spillage.commands",
     "grits_lab.policies.commands",
-    "grits_lab.policies.bc.commands",
 ]
 
 

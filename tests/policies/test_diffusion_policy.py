@@ -201,3 +201,4 @@ def test_other_encoders_learn_from_their_observation(kind):
     policy.eval()
     single = {k: v[0].numpy() for k, v in batch.items() if k != "action"}
     assert policy.predict_action(single).shape == (12, 9)
+
