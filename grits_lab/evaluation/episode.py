@@ -61,7 +61,8 @@ def run_scoop(env: Any, controller: Any, scene: EpisodeScene, history: ObsHistor
         if chunk.diagnostics:
             diagnostics.append(chunk.diagnostics)
         # Compared with the last commanded pose, not the measured one: under a load the arm
-        # settles a few millimetres off its command, which is no motion the policy asks for.
+        # settles slightly off its command (a holding chunk 3.3 mm from the command was 4.2 mm from
+        # the measured pose in a replay), which is no motion the policy asks for.
         if stops_when_still and steps >= settings.min_steps and is_still(chunk, last_action, settings.still_tolerance):
             stop_reason = "policy_holds"
             break
