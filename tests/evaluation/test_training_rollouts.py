@@ -5,7 +5,6 @@ from __future__ import annotations
 import pandas as pd
 import torch
 
-from conftest import write_demos
 from eval_helpers import N_POINTS
 from grits_lab.config import config_from_dict
 from grits_lab.evaluation.rollouts import RolloutSettings, ScoopRollouts, rollout_episodes
@@ -16,11 +15,11 @@ ROLLOUT = {"every": 10, "episodes": 2, "scoop": {"max_steps": 24, "min_steps": 1
            "cloud": {"n_points": N_POINTS, "cad_surface_samples": 1000}}
 
 
-def test_training_logs_scoop_rates_from_the_sim_and_they_repeat_for_the_same_weights(tmp_path):
+def test_training_logs_scoop_rates_from_the_sim_and_they_repeat_for_the_same_weights(models, tmp_path):
     torch.set_num_threads(1)
-    demos = write_demos(tmp_path / "demos", n=3)
+    demos = models["demos"]  # expert scoops of the sim's scene (tests/evaluation/conftest.py)
     config = config_from_dict(PolicyTrainConfig, {
-        "dataset": str(demos), "output_dir": str(tmp_path / "dp"), "batch_size": 8, "max_steps": 20, "warmup_steps": 2,
+        "dataset": demos, "output_dir": str(tmp_path / "dp"), "batch_size": 8, "max_steps": 20, "warmup_steps": 2,
         "val_fraction": 0.0, "log_every": 10, "checkpoint_every": 20, "num_threads": 1, "cache_points_per_object": N_POINTS,
         "rollout": ROLLOUT,
         "policy": {"horizon": 16, "n_obs_steps": 2, "n_action_steps": 12, "inpaint_past_actions": True,
