@@ -78,29 +78,48 @@ def _still(actions: np.ndarray, pose: np.ndarray, tolerance: float) -> bool:
     return bool(np.all(np.linalg.norm(actions[:, :3] - pose[None, :3], axis=1) < tolerance))
 
 
-class DiffusionController:
+class LearnedController:
+    """What the learned policies' controllers share: the sensors the policy reads, and its observation.
+
+    The observation is built from the policy's own `obs_keys`, so a policy that reads one more key
+    (say `past_action`) is served without a change here.
+    """
+
+    stops_when_still = True
+
+    def __init__(self, policy: Any) -> None:
+        self.policy = policy
+        cfg = policy.config
+        self.n_obs_steps = cfg.n_obs_steps
+        kind = cfg.obs_encoder.kind
+        self.cloud_steps = cfg.obs_encoder.cloud_steps if kind == "pointcloud" else 0
+        self.image_steps = cfg.n_obs_steps if kind == "rgbd" else 0
+
+    def observation(self, history: ObsHistory) -> dict[str, np.ndarray]:
+        n = self.n_obs_steps
+        sources = {
+            "ee_pose": lambda: history.poses(n),
+            "cloud": lambda: history.stacked(history.clouds, n),
+            "rgbd": lambda: history.stacked(history.rgbd, n),
+            "past_action": lambda: history.past_actions(n - 1),
+        }
+        return {key: sources[key]() for key in self.policy.obs_keys}
+
+
+class DiffusionController(LearnedController):
     """dp, dp_post and the GRITS variants: one trained policy, a sampler, optionally a predictor.
 
     Each plan draws its initial noise from a generator seeded by (episode seed, plan index), so
     dp and grits with rho = 0 see the very same noise and produce the very same episode.
     """
 
-    stops_when_still = True
-
     def __init__(self, policy: Any, predictor: Any, sampler_kind: str, guidance: Any, posthoc: Any, raw_cloud: bool = False) -> None:
         from grits_lab.sampling import DDIMSampler, GuidanceConfig, PostHocSampler
 
-        self.policy = policy
+        super().__init__(policy)
         self.predictor = predictor
         self.raw_cloud = raw_cloud
-        cfg = policy.config
-        self.n_obs_steps = cfg.n_obs_steps
-        self.n_action_steps = cfg.n_action_steps
-        self.n_past_actions = cfg.n_past_actions
-        kind = cfg.obs_encoder.kind
-        self.obs_kind = kind
-        self.cloud_steps = cfg.obs_encoder.cloud_steps if kind == "pointcloud" else 0
-        self.image_steps = cfg.n_obs_steps if kind == "rgbd" else 0
+        self.n_action_steps = policy.config.n_action_steps
         scheduler = policy.noise_scheduler
         if sampler_kind == "guided":
             self.sampler = DDIMSampler(scheduler, GuidanceConfig(
@@ -118,21 +137,11 @@ class DiffusionController:
         self.plans = 0
         self.seed = scene.seed
 
-    def observation(self, history: ObsHistory, scene: Any) -> dict[str, np.ndarray]:
-        obs = {"ee_pose": history.poses(self.n_obs_steps)}
-        if self.obs_kind == "pointcloud":
-            obs["cloud"] = history.stacked(history.clouds, self.n_obs_steps)
-        elif self.obs_kind == "rgbd":
-            obs["rgbd"] = history.stacked(history.rgbd, self.n_obs_steps)
-        if self.n_past_actions:
-            obs["past_action"] = history.past_actions(self.n_past_actions)
-        return obs
-
     def plan(self, history: ObsHistory, scene: Any) -> Chunk:
         from grits_lab.spillage import SpillageObjective
 
         start = time.perf_counter()
-        obs = self.observation(history, scene)
+        obs = self.observation(history)
         objective = None
         if self.predictor is not None:
             cloud = scene.cloud_raw() if self.raw_cloud else scene.cloud()
@@ -145,30 +154,15 @@ class DiffusionController:
         return Chunk(plan.actions[0], diagnostics, time.perf_counter() - start)
 
 
-class BCController:
+class BCController(LearnedController):
     """Behavior cloning: one deterministic regression of the next chunk per plan."""
-
-    stops_when_still = True
-
-    def __init__(self, policy: Any) -> None:
-        self.policy = policy
-        cfg = policy.config
-        self.n_obs_steps = cfg.n_obs_steps
-        self.obs_kind = cfg.obs_encoder.kind
-        self.cloud_steps = cfg.obs_encoder.cloud_steps if self.obs_kind == "pointcloud" else 0
-        self.image_steps = cfg.n_obs_steps if self.obs_kind == "rgbd" else 0
 
     def reset(self, scene: Any) -> None:
         pass
 
     def plan(self, history: ObsHistory, scene: Any) -> Chunk:
         start = time.perf_counter()
-        obs = {"ee_pose": history.poses(self.n_obs_steps)}
-        if self.obs_kind == "pointcloud":
-            obs["cloud"] = history.stacked(history.clouds, self.n_obs_steps)
-        elif self.obs_kind == "rgbd":
-            obs["rgbd"] = history.stacked(history.rgbd, self.n_obs_steps)
-        actions = self.policy.predict_action(obs)
+        actions = self.policy.predict_action(self.observation(history))
         return Chunk(actions, {}, time.perf_counter() - start)
 
 
