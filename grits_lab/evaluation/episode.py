@@ -156,13 +156,18 @@ def run_transfer(env: Any, scene: EpisodeScene, settings: Any) -> dict[str, Any]
     }
 
 
+def begin_episode(env: Any, builder: Any, *, seed: int, food: str, level: str) -> tuple[EpisodeScene, ObsHistory]:
+    """Reset the env for (food, level, seed); the scene's sensors and the history holding the first observation."""
+    obs, _ = env.reset(seed=int(seed), options={"food": food, "level": level})
+    history = ObsHistory()
+    history.append(obs)
+    return EpisodeScene(env, builder, seed), history
+
+
 def run_episode(env: Any, controller: Any, config: Any, *, seed: int, food: str, level: str, builder: Any) -> dict[str, Any]:
     """The whole task for one (method, food, level, seed); returns the metric part of the record."""
     start = time.perf_counter()
-    obs, _ = env.reset(seed=int(seed), options={"food": food, "level": level})
-    scene = EpisodeScene(env, builder, seed)
-    history = ObsHistory()
-    history.append(obs)
+    scene, history = begin_episode(env, builder, seed=seed, food=food, level=level)
     n_particles = int(env.metrics()["n_particles"])
     scoop = run_scoop(env, controller, scene, history, config.scoop)
     m = scoop["metrics"]

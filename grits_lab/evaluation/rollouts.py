@@ -60,9 +60,8 @@ class ScoopRollouts:
 
     def __call__(self, policy: Any) -> dict[str, float]:
         """Scoop success and spillage rates of `policy` (put in eval mode for the rollouts) over the episodes."""
-        from grits_lab.evaluation.controllers import DiffusionController, ObsHistory
-        from grits_lab.evaluation.episode import run_scoop
-        from grits_lab.evaluation.scene import EpisodeScene
+        from grits_lab.evaluation.controllers import DiffusionController
+        from grits_lab.evaluation.episode import begin_episode, run_scoop
 
         was_training = policy.training
         policy.eval()
@@ -70,10 +69,7 @@ class ScoopRollouts:
         success, spilled = [], []
         try:
             for food, level, seed in self.episodes:
-                obs, _ = self.env.reset(seed=seed, options={"food": food, "level": level})
-                scene = EpisodeScene(self.env, self.builder, seed)
-                history = ObsHistory()
-                history.append(obs)
+                scene, history = begin_episode(self.env, self.builder, seed=seed, food=food, level=level)
                 metrics = run_scoop(self.env, controller, scene, history, self.settings.scoop)["metrics"]
                 success.append(bool(metrics["scoop_success"]))
                 spilled.append(int(metrics["spilled"]) > 0)
