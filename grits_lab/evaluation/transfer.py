@@ -84,10 +84,8 @@ def _line(a: np.ndarray, b: np.ndarray, rotation: np.ndarray, max_step: float, e
     """Waypoints from a to b (a excluded) at most `max_step` apart (and at least `min_steps` of them),
     turning from `rotation` to `end_rotation` (slerp) on the way when it is given."""
     n = max(min_steps, int(math.ceil(np.linalg.norm(b - a) / max_step)))
-    if end_rotation is None:
-        return [_pose(a + (b - a) * (i / n), rotation) for i in range(1, n + 1)]
     m0, m1 = np.eye(4), np.eye(4)
-    m0[:3, :3], m1[:3, :3] = rotation, end_rotation
+    m0[:3, :3], m1[:3, :3] = rotation, rotation if end_rotation is None else end_rotation
     return [_pose(a + (b - a) * (i / n), interpolate_pose(m0, m1, i / n)[:3, :3]) for i in range(1, n + 1)]
 
 
