@@ -41,6 +41,14 @@ def dataset_summary(path: str | Path) -> dict[str, Any]:
     for column in ("scoop_success", "spilled_any", "label"):
         if column in index.columns and len(index):
             out[f"mean_{column}"] = round(float(index[column].astype(float).mean()), 3)
+    mechanisms = [c for c in index.columns if c.startswith("spilled_") and c != "spilled_any"]
+    if mechanisms and len(index):
+        total = float(index[mechanisms].to_numpy().sum())
+        out["spill_mechanisms"] = {
+            c.removeprefix("spilled_"): f"{int(index[c].sum())} particles ({index[c].sum() / total:.0%}) in {int((index[c] > 0).sum())} episodes"
+            if total else "0 particles"
+            for c in mechanisms
+        }
     summary = manifest.get("summary") or {}
     if "acceptance_rate" in summary:
         out["acceptance_rate"] = summary["acceptance_rate"]

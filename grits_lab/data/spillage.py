@@ -30,20 +30,20 @@ SHAPES = ["sphere", "cube", "cone", "cylinder"]
 
 @dataclass
 class ParticleRanges:
-    # The authors' generator: radius / half length 2.5-10 mm, mass 0.1-5 g, friction 0-1, whole
-    # layers of 16 particles (capped by the bowl's capacity in grits_lab.sim.foods.primitive_food).
-    radius: tuple[float, float] = (0.0025, 0.010)
+    # After the authors' generator (radius / half length 2.5-10 mm, mass 0.1-5 g, friction 0-1),
+    # in the coarse-grained world of foods.yaml (grains from 4.5 mm), with an amount drawn as a
+    # fill height of the source bowl (see grits_lab.sim.foods.primitive_food).
+    radius: tuple[float, float] = (0.0045, 0.010)
     mass: tuple[float, float] = (0.0001, 0.005)
     friction: tuple[float, float] = (0.0, 1.0)
-    layer_size: int = 16
-    layers: tuple[int, int] = (4, 12)
+    fill_height: tuple[float, float] = (0.012, 0.032)
 
     def __post_init__(self) -> None:
-        for key in ("radius", "mass", "friction"):
+        for key in ("radius", "mass", "friction", "fill_height"):
             lo, hi = getattr(self, key)
             require(0 <= lo <= hi, f"particles.{key}", [lo, hi], "a range [low, high] with 0 <= low <= high")
-        require(self.layer_size >= 1, "particles.layer_size", self.layer_size, "at least 1")
-        require(1 <= self.layers[0] <= self.layers[1], "particles.layers", list(self.layers), "a range [low, high] with 1 <= low <= high")
+        require(self.radius[0] >= 0.0015, "particles.radius", list(self.radius), "a range starting at >= 0.0015 m")
+        require(0.002 <= self.fill_height[0] and self.fill_height[1] <= 0.055, "particles.fill_height", list(self.fill_height), "within [0.002, 0.055] metres")
 
 
 @dataclass
@@ -75,7 +75,8 @@ class ExitConfig:
     # magnitude drawn per trial, sign random), over `tilt_steps` actions: how far the spoon tips
     # decides whether its load slides off, and only the trajectory carries it, so the predictor
     # has to read the trajectory, not just the cloud at the chunk's start. (0, 0) stays level.
-    tilt_deg: tuple[float, float] = (0.0, 50.0)
+    # Off by default: no policy rolls a loaded spoon; spills come from the shifted scoop itself.
+    tilt_deg: tuple[float, float] = (0.0, 0.0)
     tilt_steps: int = 6
     # Direction of the exit in the table plane, degrees from the world +x axis (away from the
     # robot). Not towards the target workspace: with the scoop's orientation the arm cannot reach
@@ -400,7 +401,7 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
     pr = p.particles
     food, count = primitive_food(
         p.shape, make_rng(derive_seed(spec.seed, "food")), radius=tuple(pr.radius), mass=tuple(pr.mass),
-        friction=tuple(pr.friction), layer_size=pr.layer_size, layers=tuple(pr.layers),
+        friction=tuple(pr.friction), fill_height=tuple(pr.fill_height),
     )
     obs, info = env.reset(seed=spec.seed, options={"food_spec": food, "n_particles": count})
     spilled_before = int(info["spilled"])
@@ -452,5 +453,6 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "mass": float(component.get("mass_mean", 0.0)),
         "friction": float(component.get("lateral_friction_mean", 0.0)),
         "min_visible_food_points": int(min(visible)) if visible else -1,
+        **{f"spilled_{k}": int(v) for k, v in metrics["spill_mechanisms"].items()},
     }
     return {"arrays": arrays, "meta": meta}

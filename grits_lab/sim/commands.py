@@ -30,9 +30,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("--json", action="store_true", help="print exactly one JSON object")
     s.set_defaults(handler=_scene)
 
-    f = subparsers.add_parser("foods", help="list the foods with split and quantity levels")
+    f = subparsers.add_parser("foods", help="list the foods with split, quantity levels and their settled fill heights")
     f.add_argument("--json", action="store_true", help="print exactly one JSON object")
     f.add_argument("--foods-file", help="a food YAML file instead of the packaged library")
+    f.add_argument("--food", action="append", help="only this food (repeatable)")
+    f.add_argument("--seed", type=int, default=0, help="seed of the settled bowl whose fill height is measured")
+    f.add_argument("--no-settle", action="store_true", help="skip building and settling each level (no fill heights; instant)")
     f.set_defaults(handler=_foods)
 
 
@@ -148,17 +151,60 @@ def _scene(args: argparse.Namespace) -> int:
     return 0
 
 
+def level_survey(library, names: list[str], seed: int = 0, settle: bool = True, config=None) -> list[dict]:
+    """Per food and level: the amount, the particle count and (when `settle`) the settled fill height.
+
+    Each level is built and settled with `seed`; fill height in metres (90th percentile of particle
+    tops above the source bowl's inner floor), layers = fill height / the largest piece height.
+    """
+    from grits_lab.sim.foods import level_count
+
+    env = None
+    rows = []
+    try:
+        for name in names:
+            food = library.get(name)
+            levels = {}
+            for level, amount in food.levels.items():
+                entry = {"amount": amount.describe(), "n_particles": level_count(food, name, level)}
+                if settle:
+                    if env is None:
+                        from grits_lab.sim.config import SimConfig
+                        from grits_lab.sim.env import ScoopEnv
+
+                        env = ScoopEnv(config or SimConfig())
+                    env.reset(seed=seed, options={"food_spec": food, "level": level})
+                    height = env.fill_height()
+                    piece = 2 * max(p.radius for p in env.world.particle_components)
+                    entry.update(fill_height_m=round(height, 4), layers=round(height / piece, 2), settle_time_s=env.world.settle_time_s)
+                levels[level] = entry
+            rows.append({"food": name, "split": food.split, "success_rule": food.success_rule,
+                         "shapes": sorted({c.shape for c in food.components}),
+                         "coarse_grain": max(c.coarse_grain for c in food.components),
+                         "levels": levels, "description": food.description})
+    finally:
+        if env is not None:
+            env.close()
+    return rows
+
+
 def _foods(args: argparse.Namespace) -> int:
+    from grits_lab.sim.config import SimConfig
     from grits_lab.sim.foods import load_foods
 
     library = load_foods(args.foods_file)
-    rows = [{"food": name, "split": f.split, "levels": dict(f.levels), "success_rule": f.success_rule,
-             "shapes": sorted({c.shape for c in f.components}), "description": f.description}
-            for name, f in library.foods.items()]
+    names = args.food or library.names()
+    for name in names:
+        library.get(name)  # unknown names fail before any world is built
+    rows = level_survey(library, names, seed=args.seed, settle=not args.no_settle, config=SimConfig(foods_file=args.foods_file))
     if args.json:
-        print(json.dumps({"foods": rows}))
+        print(json.dumps({"seed": args.seed, "foods": rows}))
     else:
         for r in rows:
-            levels = ", ".join(f"{k}={v}" for k, v in r["levels"].items())
-            print(f"{r['food']:<16} {r['split']:<7} {levels:<34} {'/'.join(r['shapes'])}", file=sys.stdout)
+            parts = []
+            for k, v in r["levels"].items():
+                amount = f"{100 * v['amount']['fill_height_m']:.1f} cm" if "fill_height_m" in v["amount"] else f"{v['amount']['pieces']} pieces"
+                settled = f", settled {100 * v['fill_height_m']:.1f} cm" if "fill_height_m" in v else ""
+                parts.append(f"{k}={amount} ({v['n_particles']} particles{settled})")
+            print(f"{r['food']:<16} {r['split']:<7} {'/'.join(r['shapes']):<22} {'; '.join(parts)}", file=sys.stdout)
     return 0

@@ -40,24 +40,33 @@ def _default_cameras() -> list[CameraConfig]:
 class SimConfig:
     """Everything that shapes an episode besides the food and the seed.
 
-    Physics: 240 Hz with 10 solver iterations keeps 2.5 mm particles stable (no explosions, no
-    tunnelling through the 3 mm spoon) while 160 particles run faster than real time on one
-    core; the authors' code used 1/256 s, reachable through `time_step`.
+    Physics: 120 Hz keeps the coarse-grained particles of `foods.yaml` (4.5 mm and up) stable
+    (no explosions, no tunnelling through the 2 mm spoon) while a bowl filled 3 cm deep steps
+    about as fast as real time on one core (measured lever by lever in `benchmarks/bench_sim.py`);
+    the authors' code used 1/256 s, reachable through `time_step`. 30 solver iterations hold a
+    pile of six or more layers up: with 10, the bottom particles of a 2.8 cm pile sink 2.5 mm
+    (spheres) to 5 mm (cylinders) into the bowl's floor; with 30, under 1 mm, for little extra
+    cost because contact detection, not the solver, dominates a step.
     """
 
-    time_step: float = 1.0 / 240.0
-    solver_iterations: int = 10
+    time_step: float = 1.0 / 120.0
+    solver_iterations: int = 30
     # Bullet keeps contact points up to this distance (default 2 cm). With millimetre particles the
-    # default makes every particle track all neighbours within 2 cm; 2 mm cuts a step of 160
-    # beans from ~4.4 ms to ~1.3 ms with the same number of touching contacts.
-    contact_breaking_threshold: float = 0.002
+    # default makes every particle track all neighbours within 2 cm; 1 mm keeps only touching
+    # neighbours (see benchmarks/bench_sim.py for the measured effect).
+    contact_breaking_threshold: float = 0.001
+    # Freezing: before each action, particles at rest farther than this (metres) from the spoon's
+    # path over the action are made static (mass 0) and the others dynamic again, so the solver
+    # only works where the spoon is. None keeps every particle dynamic (the default; its effect on
+    # speed and on spill counts is measured in benchmarks/bench_sim.py).
+    freeze_distance: float | None = None
     control_hz: float = 10.0  # rate of the 9-D pose actions
     ik_per_action: int = 4  # IK solves per action on the interpolated pose path
     ik_position_tolerance: float = 0.01  # metres; larger IK residuals count as IK failures
     ik_orientation_tolerance: float = 0.15  # radians
     # Settling before an episode: run at least settle_min_s, stop when every particle is slower
     # than settle_speed (m/s), give up at settle_max_s.
-    settle_min_s: float = 0.25
+    settle_min_s: float = 0.4
     settle_max_s: float = 1.5
     settle_speed: float = 0.03
     source_bowl_xy: tuple[float, float] = (0.6, -0.1)
@@ -74,6 +83,7 @@ class SimConfig:
     def __post_init__(self) -> None:
         require(1e-4 <= self.time_step <= 0.02, "time_step", self.time_step, "in [0.0001, 0.02] seconds")
         require(0 < self.contact_breaking_threshold <= 0.05, "contact_breaking_threshold", self.contact_breaking_threshold, "in (0, 0.05] metres")
+        require(self.freeze_distance is None or self.freeze_distance > 0, "freeze_distance", self.freeze_distance, "positive metres, or null")
         require(1 <= self.solver_iterations <= 200, "solver_iterations", self.solver_iterations, "in [1, 200]")
         require(0 < self.control_hz <= 100, "control_hz", self.control_hz, "in (0, 100]")
         require(self.ik_per_action >= 1, "ik_per_action", self.ik_per_action, ">= 1")

@@ -22,7 +22,7 @@ from grits_lab.seeding import derive_seed, make_rng
 from grits_lab.sim.cameras import CameraImage, render
 from grits_lab.sim.config import SimConfig
 from grits_lab.sim.foods import FoodSpec, level_count, load_foods, sample_particles
-from grits_lab.sim.metrics import COVERAGE_THRESHOLD, SpillTracker, classify, spoon_coverage
+from grits_lab.sim.metrics import COVERAGE_THRESHOLD, SpillTracker, classify, fill_height, spoon_coverage, spoon_outside_bowl
 from grits_lab.sim.robot import REST_POSE, PandaKinematics, pose_to_matrix, spoon_in_hand
 from grits_lab.sim.shapes import TARGET_BOWL, BowlGeometry, SpoonGeometry
 from grits_lab.sim.world import World, build_world, settle
@@ -160,7 +160,9 @@ class ScoopEnv:
         self.tracker = SpillTracker(len(self.world.particles))
         self.step_count = 0
         self.ik_failures = 0
-        self.initial_outside = int(self._classify().outside_source.sum())
+        counts = self._classify()
+        self.tracker.observe(counts, self._spoon_outside_source())
+        self.initial_outside = int(counts.outside_source.sum())
         return self._obs(), self._info(ik_failure=False)
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
@@ -172,6 +174,8 @@ class ScoopEnv:
         target = pose9_to_matrix(a)
         start = self._pose_target
         cfg = self.config
+        if cfg.freeze_distance is not None and len(world.particles):
+            world.freeze(self._far_at_rest(world, start[:3, 3], target[:3, 3], cfg.freeze_distance))
         pieces = cfg.ik_per_action
         steps = cfg.substeps
         failed = False
@@ -191,9 +195,18 @@ class ScoopEnv:
         self.step_count += 1
         self.ik_failures += int(failed)
         before = self.tracker.history[-1] if self.tracker.history else 0
-        spilled = self.tracker.update(self._classify())
+        spilled = self.tracker.update(self._classify(), self._spoon_outside_source())
         truncated = self.step_count >= cfg.max_episode_steps
         return self._obs(), -float(spilled - before), False, truncated, self._info(ik_failure=failed)
+
+    @staticmethod
+    def _far_at_rest(world: World, a: np.ndarray, b: np.ndarray, distance: float) -> np.ndarray:
+        """(N,) particles farther than `distance` from the segment a-b (the spoon's path) and at rest (or frozen)."""
+        pos = world.particle_positions()
+        seg = b - a
+        t = np.clip((pos - a) @ seg / max(float(seg @ seg), 1e-12), 0.0, 1.0)
+        far = np.linalg.norm(pos - (a + t[:, None] * seg), axis=1) > distance
+        return far & (world.frozen | (world.particle_speeds() < 0.01))
 
     def close(self) -> None:
         self.close_world()
@@ -243,6 +256,12 @@ class ScoopEnv:
     def scene(self) -> SceneGeometry:
         return scene_geometry(self.config, self._require_world().target_bowl_position)
 
+    def fill_height(self) -> float:
+        """Food height in the source bowl now (m): 90th percentile of particle tops above the inner floor."""
+        w = self._require_world()
+        tops = np.array([p.radius for p in w.particle_components])[w.particle_component_index] if len(w.particles) else np.zeros(0)
+        return fill_height(w.particle_positions(), tops, w.source_bowl_position, w.source_geometry)
+
     def metrics(self) -> dict[str, Any]:
         """Scoop metrics of the current state (counts of particles; see grits_lab.sim.metrics)."""
         w = self._require_world()
@@ -264,6 +283,7 @@ class ScoopEnv:
             "scoop_failure": not success,
             "spillage": spilled > 0,
             "first_spill_step": self.tracker.first_spill_step,
+            "spill_mechanisms": self.tracker.mechanisms(counts),
             "ik_failures": self.ik_failures,
         }
 
@@ -276,6 +296,10 @@ class ScoopEnv:
                 raise InputError(f"spoon_home {list(self.config.spoon_home)} is out of the robot's reach")
             self._home_joints = ik.joints
         return self._home_joints.copy()
+
+    def _spoon_outside_source(self) -> bool:
+        w = self._require_world()
+        return spoon_outside_bowl(w.spoon_matrix(), w.source_bowl_position, w.source_geometry)
 
     def _classify(self, positions: np.ndarray | None = None):
         w = self._require_world()

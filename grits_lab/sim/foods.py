@@ -2,7 +2,13 @@
 
 A food is a recipe of one or more particle components (sphere, cube, cone or cylinder), each with
 parameter ranges (size, mass, friction, restitution, contact softness) and a share of the
-particle count, plus quantity levels (total particle counts). Shapes are drawn once per
+particle count, plus quantity levels given as physical amounts: a fill height of the source bowl
+for small-particle foods, a piece count for large pieces (`QuantityLevel`). The particle count of
+a fill height is derived from the bowl's inner volume up to that height, a packing fraction per
+shape and the mean simulated particle volume (`level_count`). Small grains may be coarse-grained
+(`ParticleComponent.coarse_grain`): simulated particles larger than the real grain by that
+factor, with mass scaled by its cube (same density), so the same volume of food needs fewer
+bodies, as is standard in granular simulation. Shapes are drawn once per
 component per episode (one shape per batch of particles, which PyBullet creates in one call);
 mass, friction and restitution are drawn per particle. The packaged library is `foods.yaml`
 beside this file; users pass their own file with the same schema (`SimConfig.foods_file`).
@@ -19,10 +25,32 @@ import numpy as np
 
 from grits_lab.config import config_from_dict, load_yaml
 from grits_lab.errors import ConfigError, InputError
+from grits_lab.sim.shapes import BowlGeometry
 
 PACKAGED_FOODS = Path(__file__).with_name("foods.yaml")
 SHAPES = ("sphere", "cube", "cone", "cylinder")
 Range = tuple[float, float]
+# Random loose packing fractions of settled particles (share of the bulk volume that is solid):
+# spheres about 0.6; elongated and angular pieces pack looser.
+PACKING_FRACTION = {"sphere": 0.60, "cube": 0.55, "cylinder": 0.52, "cone": 0.45}
+MAX_PARTICLES = 2000
+
+
+@dataclass
+class QuantityLevel:
+    """A quantity level as a physical amount: exactly one of `fill_height` or `pieces`.
+
+    fill_height: metres of food above the source bowl's inner floor (small-particle foods); the
+        particle count is the bowl's inner volume up to that height times the packing fraction,
+        over the mean simulated particle volume.
+    pieces: a count of large pieces.
+    """
+
+    fill_height: float | None = None
+    pieces: int | None = None
+
+    def describe(self) -> dict:
+        return {"fill_height_m": self.fill_height} if self.fill_height is not None else {"pieces": self.pieces}
 
 
 @dataclass
@@ -30,8 +58,10 @@ class ParticleComponent:
     """One kind of particle in a food. Lengths in metres, mass in kg; each range is [low, high]."""
 
     shape: Literal["sphere", "cube", "cone", "cylinder"]
-    radius: Range  # sphere/cone/cylinder radius; cube half edge
-    half_length: Range | None = None  # cone/cylinder half height (defaults to the radius)
+    radius: Range  # real grain: sphere/cone/cylinder radius; cube half edge
+    half_length: Range | None = None  # real grain: cone/cylinder half height (defaults to the radius)
+    # Simulated size / real size (>= 1). Lengths are multiplied by it and masses by its cube.
+    coarse_grain: float = 1.0
     fraction: float = 1.0  # share of the food's particle count
     mass: Range = (0.0005, 0.001)
     lateral_friction: Range = (0.5, 0.5)
@@ -46,10 +76,10 @@ class ParticleComponent:
 
 @dataclass
 class FoodSpec:
-    """A food: its split, quantity levels (total particle counts) and particle components."""
+    """A food: its split, quantity levels (physical amounts) and particle components."""
 
     split: Literal["train", "unseen"]
-    levels: dict[str, int]
+    levels: dict[str, QuantityLevel]
     components: list[ParticleComponent]
     # Scoop success rule (paper): large pieces need one item lifted, small particles need one
     # third of the spoon covered.
@@ -137,9 +167,14 @@ def validate_food(name: str, food: FoodSpec, where: str = "") -> None:
     try:
         if not food.levels:
             raise ConfigError(f"`foods.{name}.levels` must list at least one quantity level. Got {{}}.")
-        for level, count in food.levels.items():
-            if count < 1 or count > 2000:
-                raise ConfigError(f"`foods.{name}.levels.{level}` must be a particle count in [1, 2000]. Got {count!r}.")
+        for level, amount in food.levels.items():
+            key = f"foods.{name}.levels.{level}"
+            if (amount.fill_height is None) == (amount.pieces is None):
+                raise ConfigError(f"`{key}` must give exactly one of fill_height (metres) or pieces. Got {amount.describe()!r}.")
+            if amount.fill_height is not None and not 0.002 <= amount.fill_height <= 0.055:
+                raise ConfigError(f"`{key}.fill_height` must be in [0.002, 0.055] metres (the bowl is 5.9 cm deep inside). Got {amount.fill_height!r}.")
+            if amount.pieces is not None and not 1 <= amount.pieces <= MAX_PARTICLES:
+                raise ConfigError(f"`{key}.pieces` must be in [1, {MAX_PARTICLES}]. Got {amount.pieces!r}.")
         if not food.components:
             raise ConfigError(f"`foods.{name}.components` must list at least one particle component. Got [].")
         for i, c in enumerate(food.components):
@@ -152,6 +187,8 @@ def validate_food(name: str, food: FoodSpec, where: str = "") -> None:
             _check_range(c.rolling_friction, f"{key}.rolling_friction", 0.0, 1.0)
             _check_range(c.spinning_friction, f"{key}.spinning_friction", 0.0, 1.0)
             _check_range(c.restitution, f"{key}.restitution", 0.0, 1.0)
+            if not 1.0 <= c.coarse_grain <= 4.0:
+                raise ConfigError(f"`{key}.coarse_grain` must be in [1, 4] (simulated size / real size). Got {c.coarse_grain!r}.")
             if not c.fraction > 0:
                 raise ConfigError(f"`{key}.fraction` must be positive. Got {c.fraction!r}.")
             for soft in ("contact_stiffness", "contact_damping"):
@@ -162,6 +199,10 @@ def validate_food(name: str, food: FoodSpec, where: str = "") -> None:
                 raise ConfigError(f"`{key}`: give both contact_stiffness and contact_damping, or neither.")
             if any(not 0.0 <= x <= 1.0 for x in c.color):
                 raise ConfigError(f"`{key}.color` must be RGBA values in [0, 1]. Got {list(c.color)!r}.")
+        for level in food.levels:
+            count = level_count(food, name, level)
+            if not 1 <= count <= MAX_PARTICLES:
+                raise ConfigError(f"`foods.{name}.levels.{level}` makes {count} particles; it must make 1 to {MAX_PARTICLES}.")
     except ConfigError as exc:
         raise ConfigError(f"{prefix}{exc}") from None
 
@@ -187,10 +228,50 @@ def load_foods(path: str | Path | None = None) -> FoodLibrary:
     return library
 
 
+def particle_volume(c: ParticleComponent) -> float:
+    """Mean simulated volume of one particle of `c` (m^3), coarse-graining included."""
+    r = 0.5 * (c.radius[0] + c.radius[1]) * c.coarse_grain
+    hl = (0.5 * (c.half_length[0] + c.half_length[1]) if c.half_length is not None else 0.5 * (c.radius[0] + c.radius[1])) * c.coarse_grain
+    if c.shape == "sphere":
+        return 4.0 / 3.0 * math.pi * r**3
+    if c.shape == "cube":
+        return 8.0 * r**3
+    if c.shape == "cylinder":
+        return math.pi * r**2 * 2 * hl
+    return math.pi * r**2 * 2 * hl / 3.0  # cone
+
+
+def bowl_volume(bowl: BowlGeometry, height: float) -> float:
+    """Inner volume (m^3) of `bowl` from its inner floor up to `height` metres above it (a frustum)."""
+    h = min(max(height, 0.0), bowl.depth - bowl.floor_thickness)
+    r0 = bowl.floor_radius
+    r1 = float(bowl.inner_radius_at(bowl.floor_thickness + h))
+    return math.pi * h / 3.0 * (r0 * r0 + r0 * r1 + r1 * r1)
+
+
+def fill_count(food: FoodSpec, fill_height: float, bowl: BowlGeometry | None = None) -> int:
+    """Particles of `food` that fill `bowl` (default the source bowl) to `fill_height` metres.
+
+    count = bowl_volume(h) * sum_i(f_i * packing_i) / sum_i(f_i * volume_i), with f_i the component
+    fractions, packing_i the shape's random loose packing fraction and volume_i the mean
+    simulated particle volume.
+    """
+    bowl = bowl or BowlGeometry()
+    fractions = np.array([c.fraction for c in food.components], dtype=np.float64)
+    fractions /= fractions.sum()
+    packing = sum(f * PACKING_FRACTION[c.shape] for f, c in zip(fractions, food.components))
+    volume = sum(f * particle_volume(c) for f, c in zip(fractions, food.components))
+    return max(1, int(round(bowl_volume(bowl, fill_height) * packing / volume)))
+
+
 def level_count(food: FoodSpec, name: str, level: str) -> int:
+    """Particle count of quantity `level` of `food` (see `QuantityLevel`). Raises InputError for an unknown level."""
     if level not in food.levels:
         raise InputError(f"unknown quantity level {level!r} for food {name!r}; levels: {', '.join(food.levels)}")
-    return food.levels[level]
+    amount = food.levels[level]
+    if amount.pieces is not None:
+        return int(amount.pieces)
+    return fill_count(food, float(amount.fill_height))
 
 
 def sample_particles(food: FoodSpec, count: int, rng: np.random.Generator) -> list[SampledParticles]:
@@ -201,8 +282,8 @@ def sample_particles(food: FoodSpec, count: int, rng: np.random.Generator) -> li
     counts[np.argmax(fractions)] += count - counts.sum()
     out = []
     for c, n in zip(food.components, counts):
-        radius = float(rng.uniform(*c.radius))
-        half_length = float(rng.uniform(*c.half_length)) if c.half_length is not None else radius
+        radius = float(rng.uniform(*c.radius)) * c.coarse_grain
+        half_length = float(rng.uniform(*c.half_length)) * c.coarse_grain if c.half_length is not None else radius
         n = int(n)
         out.append(
             SampledParticles(
@@ -210,7 +291,7 @@ def sample_particles(food: FoodSpec, count: int, rng: np.random.Generator) -> li
                 radius=radius,
                 half_length=half_length,
                 count=n,
-                mass=rng.uniform(*c.mass, size=n),
+                mass=rng.uniform(*c.mass, size=n) * c.coarse_grain**3,
                 lateral_friction=rng.uniform(*c.lateral_friction, size=n),
                 rolling_friction=rng.uniform(*c.rolling_friction, size=n),
                 spinning_friction=rng.uniform(*c.spinning_friction, size=n),
@@ -226,17 +307,18 @@ def sample_particles(food: FoodSpec, count: int, rng: np.random.Generator) -> li
 def primitive_food(
     shape: str,
     rng: np.random.Generator,
-    radius: Range = (0.0025, 0.010),
+    radius: Range = (0.0045, 0.010),
     mass: Range = (0.0001, 0.005),
     friction: Range = (0.0, 1.0),
-    layer_size: int = 16,
-    layers: tuple[int, int] = (4, 12),
+    fill_height: Range = (0.012, 0.032),
 ) -> tuple[FoodSpec, int]:
-    """A random single-shape food for the spillage dataset, as in the authors' generator.
+    """A random single-shape food for the spillage dataset, after the authors' generator.
 
-    Radius / half length uniform in 2.5-10 mm, mass 0.1-5 g, friction 0-1 and a count of whole
-    layers of 16 particles. Ranges collapse to the drawn value, so the episode's particles
-    share one parameter set (returned FoodSpec, particle count).
+    Radius / half length uniform in `radius` (m; the authors draw 2.5-10 mm, the coarse-grained
+    world of `foods.yaml` starts at 4.5 mm), mass in `mass` (kg), friction in `friction`, and an
+    amount given as a fill height of the source bowl drawn uniformly in `fill_height` (m). Ranges
+    collapse to the drawn value, so the episode's particles share one parameter set. Returns the
+    FoodSpec (one level, "trial") and its particle count.
     """
     if shape not in SHAPES:
         raise InputError(f"unknown particle shape {shape!r}; shapes: {', '.join(SHAPES)}")
@@ -244,12 +326,7 @@ def primitive_food(
     hl = float(rng.uniform(*radius)) if shape in ("cone", "cylinder") else r
     m = float(rng.uniform(*mass))
     mu = float(rng.uniform(*friction))
-    # Large particles fill the bowl with fewer items: cap the count by the bowl's floor capacity.
-    n_layers = int(rng.integers(layers[0], layers[1] + 1))
-    count = layer_size * n_layers
-    # The source bowl holds about 0.75 l; fill at most 40% of it with the particles' bounding spheres.
-    capacity = int(0.4 * 0.00075 / ((4 / 3) * math.pi * max(r, hl) ** 3))
-    count = max(layer_size, min(count, capacity - capacity % layer_size))
+    height = float(rng.uniform(*fill_height))
     comp = ParticleComponent(
         shape=shape,  # type: ignore[arg-type]
         radius=(r, r),
@@ -261,6 +338,6 @@ def primitive_food(
         restitution=(0.05, 0.05),
         color=(0.85, 0.65, 0.3, 1.0),
     )
-    spec = FoodSpec(split="train", levels={"trial": count}, components=[comp],
+    spec = FoodSpec(split="train", levels={"trial": QuantityLevel(fill_height=height)}, components=[comp],
                     success_rule="items" if r >= 0.007 else "coverage", description=f"random {shape} particles")
-    return spec, count
+    return spec, min(level_count(spec, "random", "trial"), MAX_PARTICLES)

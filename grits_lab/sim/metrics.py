@@ -61,6 +61,11 @@ def outside_bowl(positions: np.ndarray, bowl_position: np.ndarray, bowl: BowlGeo
     return (r > bowl.outer_radius + 0.003) | ((d[:, 2] < bowl.depth) & (r > wall_outer)) | (d[:, 2] < -0.01)
 
 
+def spoon_outside_bowl(spoon_pose: np.ndarray, bowl_position: np.ndarray, bowl: BowlGeometry) -> bool:
+    """Whether the spoon frame's origin is beyond the bowl's outer rim in the table plane."""
+    return bool(np.linalg.norm(spoon_pose[:2, 3] - bowl_position[:2]) > bowl.outer_radius)
+
+
 def classify(positions: np.ndarray, spoon_pose: np.ndarray, source_position: np.ndarray, target_position: np.ndarray,
              source: BowlGeometry, target: BowlGeometry, spoon: SpoonGeometry) -> ParticleCounts:
     in_spoon = in_spoon_mask(positions, spoon_pose, spoon)
@@ -71,6 +76,21 @@ def classify(positions: np.ndarray, spoon_pose: np.ndarray, source_position: np.
         outside_source=outside_bowl(positions, source_position, source),
         lifted=lifted,
     )
+
+
+def fill_height(positions: np.ndarray, tops: np.ndarray, bowl_position: np.ndarray, bowl: BowlGeometry,
+                percentile: float = 90.0) -> float:
+    """Height of the food in a bowl (m): the `percentile` of particle tops above the inner floor.
+
+    positions: (N, 3) particle centres (world); tops: (N,) height of each particle's top above its
+    centre (its vertical half extent, resting). Only particles inside the bowl's rim cylinder count.
+    """
+    d = positions - bowl_position
+    inside = np.linalg.norm(d[:, :2], axis=1) < bowl.rim_radius
+    if not inside.any():
+        return 0.0
+    heights = d[inside, 2] + tops[inside] - bowl.floor_thickness
+    return float(np.percentile(heights, percentile))
 
 
 def spoon_coverage(positions: np.ndarray, radii: np.ndarray, spoon_pose: np.ndarray, spoon: SpoonGeometry) -> float:
@@ -88,17 +108,43 @@ def spoon_coverage(positions: np.ndarray, radii: np.ndarray, spoon_pose: np.ndar
     return float(covered.mean())
 
 
+SPILL_MECHANISMS = ("over_rim", "off_spoon", "elsewhere")
+
+
 class SpillTracker:
-    """Keeps the sticky per-particle spilled flags and the spilled count after every action step."""
+    """Keeps the sticky per-particle spilled flags, the spilled count after every action step and
+    where each spilled particle left from (its spill mechanism).
+
+    Mechanisms, from the last check (one per action, 10 Hz) before a particle was first spilled:
+    - over_rim: it was not in the spoon: it left the bowl over the rim (pushed by the drag, or
+      rolling off a heap).
+    - off_spoon: it was in the spoon and the spoon was outside the source bowl's footprint (it fell
+      off the spoon on the way out or during the transfer).
+    - elsewhere: it was in the spoon above the bowl and still landed outside it (bounced over the
+      rim after falling off the spoon).
+    """
 
     def __init__(self, n_particles: int) -> None:
         self.spilled_flags = np.zeros(n_particles, dtype=bool)
+        self.mechanism = np.full(n_particles, -1, dtype=np.int8)  # index into SPILL_MECHANISMS, -1 not spilled
         self.history: list[int] = []
         self.first_spill_step = -1
+        self._was_in_spoon = np.zeros(n_particles, dtype=bool)
+        self._spoon_was_outside = False
 
-    def update(self, counts: ParticleCounts) -> int:
+    def observe(self, counts: ParticleCounts, spoon_outside_source: bool) -> None:
+        """Remember where particles and spoon are (the reference for the next update's mechanisms)."""
+        self._was_in_spoon = counts.in_spoon.copy()
+        self._spoon_was_outside = bool(spoon_outside_source)
+
+    def update(self, counts: ParticleCounts, spoon_outside_source: bool = False) -> int:
         now = counts.outside_source & ~counts.in_spoon & ~counts.in_target
+        new = now & ~self.spilled_flags
+        if new.any():
+            kind = np.where(~self._was_in_spoon[new], 0, 1 if self._spoon_was_outside else 2)
+            self.mechanism[new] = kind
         self.spilled_flags |= now
+        self.observe(counts, spoon_outside_source)
         spilled = int((self.spilled_flags & ~counts.in_target).sum())
         if spilled > 0 and self.first_spill_step < 0:
             self.first_spill_step = len(self.history)
@@ -107,3 +153,8 @@ class SpillTracker:
 
     def current(self, counts: ParticleCounts) -> int:
         return int((self.spilled_flags & ~counts.in_target).sum())
+
+    def mechanisms(self, counts: ParticleCounts) -> dict[str, int]:
+        """Spilled particles now (not in the target bowl) by mechanism: {over_rim, off_spoon, elsewhere}."""
+        spilled = self.spilled_flags & ~counts.in_target
+        return {name: int((spilled & (self.mechanism == i)).sum()) for i, name in enumerate(SPILL_MECHANISMS)}

@@ -241,3 +241,4 @@ def cone_mesh(radius: float, half_height: float, sides: int = 12) -> tuple[np.nd
         faces.append((i, j, apex))
         faces.append((j, i, bottom))
     return verts, np.array(faces, dtype=np.int64)
+

@@ -73,6 +73,8 @@ class World:
     target_geometry: BowlGeometry = TARGET_BOWL
     spoon_geometry: SpoonGeometry = field(default_factory=SpoonGeometry)
     settle_time_s: float = 0.0
+    particle_masses: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (N,) kg, as built
+    frozen: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))  # (N,) made static by `freeze`
 
     # ---- state queries -------------------------------------------------------------------
     def particle_positions(self) -> np.ndarray:
@@ -103,6 +105,17 @@ class World:
             self.robot, list(ARM_JOINTS), pb.POSITION_CONTROL, targetPositions=[float(q) for q in joints],
             forces=list(ARM_FORCES), positionGains=[0.3] * 7,
         )
+
+    def freeze(self, mask: np.ndarray) -> None:
+        """Make the particles of `mask` (N,) static (mass 0, at rest where they are) and the rest dynamic again."""
+        mask = np.asarray(mask, dtype=bool)
+        if len(self.frozen) != len(self.particles):
+            self.frozen = np.zeros(len(self.particles), dtype=bool)
+        for i in np.flatnonzero(mask & ~self.frozen):
+            self.client.changeDynamics(int(self.particles[i]), -1, mass=0.0)
+        for i in np.flatnonzero(~mask & self.frozen):
+            self.client.changeDynamics(int(self.particles[i]), -1, mass=float(self.particle_masses[i]))
+        self.frozen = mask.copy()
 
     def step(self, n: int = 1) -> None:
         for _ in range(n):
@@ -164,7 +177,7 @@ def _particle_shapes(client: BulletClient, p: SampledParticles) -> tuple[int, in
         return (client.createCollisionShape(pb.GEOM_CYLINDER, radius=p.radius, height=2 * p.half_length),
                 client.createVisualShape(pb.GEOM_CYLINDER, radius=p.radius, length=2 * p.half_length, rgbaColor=color))
     verts, faces = cone_mesh(p.radius, p.half_length)
-    col = client.createCollisionShape(pb.GEOM_MESH, vertices=verts.tolist())  # convex hull of the cone
+    col = client.createCollisionShape(pb.GEOM_MESH, vertices=verts.tolist())  # convex hull
     vis = client.createVisualShape(pb.GEOM_MESH, vertices=verts.tolist(), indices=faces.reshape(-1).tolist(), rgbaColor=color)
     return col, vis
 
@@ -264,7 +277,7 @@ def build_world(config: SimConfig, components: list[SampledParticles], rng: np.r
         client.setCollisionFilterPair(robot, spoon, link, -1, 0)
         client.setCollisionFilterPair(robot, table, link, -1, 0 if link <= 1 else 1)
 
-    ids, comp_of = [], []
+    ids, comp_of, masses = [], [], []
     positions, comp_index = pack_in_bowl(components, source_geometry, src_pos, rng)
     for ci, p in enumerate(components):
         mask = comp_index == ci
@@ -288,12 +301,14 @@ def build_world(config: SimConfig, components: list[SampledParticles], rng: np.r
                 client.resetBasePositionAndOrientation(body, positions[mask][k].tolist(), q)
         ids.extend(batch)
         comp_of.extend([ci] * len(batch))
+        masses.extend(float(m) for m in p.mass[: len(batch)])
     return World(
         client=client, config=config, table=table, source_bowl=source_bowl, target_bowl=target_bowl, robot=robot,
         spoon=spoon, particles=np.array(ids, dtype=np.int64), particle_components=components,
         particle_component_index=np.array(comp_of, dtype=np.int64), source_bowl_position=src_pos,
         target_bowl_position=tgt_pos, source_geometry=source_geometry, target_geometry=target_geometry,
-        spoon_geometry=spoon_geometry,
+        spoon_geometry=spoon_geometry, particle_masses=np.array(masses, dtype=np.float64),
+        frozen=np.zeros(len(ids), dtype=bool),
     )
 
 

@@ -55,7 +55,7 @@ def _short_spillage_config(tmp_path, **overrides):
     np.save(tmp_path / "base.npy", base)
     data = {
         "kind": "spillage", "output": str(tmp_path / "spill"), "trials": 2, "spill_fraction": 0.0, "shapes": ["sphere"],
-        "base_trajectory": str(tmp_path / "base.npy"), "particles": {"layers": [1, 1], "radius": [0.004, 0.006]},
+        "base_trajectory": str(tmp_path / "base.npy"), "particles": {"fill_height": [0.005, 0.005], "radius": [0.004, 0.006]},
         "cloud": {"n_points": 200, "cad_surface_samples": 2000}, "sim": {"cameras": SMALL_CAMERAS},
         "executor": {"backend": "serial"}, "exit": {"enabled": False},
     }
@@ -65,6 +65,8 @@ def _short_spillage_config(tmp_path, **overrides):
 
 def test_spillage_trial_clouds_have_n_points_where_the_objects_are(tmp_path):
     from grits_lab.data.jobs import base_trajectory
+    from grits_lab.seeding import derive_seed, make_rng
+    from grits_lab.sim.foods import fill_count, primitive_food
     from grits_lab.data.spillage import _sim_config, make_trial_spec, source_bowl_region
 
     config = _short_spillage_config(tmp_path)
@@ -83,7 +85,8 @@ def test_spillage_trial_clouds_have_n_points_where_the_objects_are(tmp_path):
     for key in ("chunk_cloud", "chunk_cloud_raw"):
         assert arrays[key].shape == (c, 3, 200, 3) and arrays[key].dtype == np.float16
     assert meta["label"] == int(arrays["chunk_spilled"].any())
-    assert meta["n_particles"] == 16
+    food, count = primitive_food("sphere", make_rng(derive_seed(spec.seed, "food")), radius=(0.004, 0.006), fill_height=(0.005, 0.005))
+    assert meta["n_particles"] == count == fill_count(food, 0.005)
     # the first cloud is taken before any motion: the food is in the source bowl
     first = arrays["chunk_cloud"][0].astype(np.float64)
     rel_food = first[0] - bowl[:3, 3]

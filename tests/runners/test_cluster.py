@@ -86,7 +86,7 @@ def test_collection_runs_unchanged_on_the_cluster(ray_head, tmp_path):
 
     config = {
         "kind": "spillage", "output": str(tmp_path / "spill"), "trials": 2, "spill_fraction": 0.0, "shapes": ["sphere"],
-        "particles": {"layers": [1, 1]}, "cloud": {"n_points": 64, "cad_surface_samples": 500},
+        "particles": {"fill_height": [0.005, 0.005]}, "cloud": {"n_points": 64, "cad_surface_samples": 500},
         "sim": {"cameras": [{"name": "front", "eye": [1.05, -0.15, 0.55], "target": [0.5, -0.1, 0.03], "width": 64, "height": 48}]},
         "executor": {"address": ray_head},
     }

@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 
 import numpy as np
+
+from grits_lab.sim.foods import load_foods
 import pytest
 
 from grits_lab.cli import main
@@ -25,7 +27,7 @@ def assert_one_line_error(code, err, *needles):
 
 
 def test_foods_json_lists_all_foods(capsys):
-    code, out, _ = run(capsys, "foods", "--json")
+    code, out, _ = run(capsys, "foods", "--json", "--no-settle")
     data = json.loads(out)
     assert code == 0 and len(data["foods"]) == 16
     orange = next(f for f in data["foods"] if f["food"] == "orange")
@@ -68,7 +70,7 @@ def test_missing_trajectory_file(capsys, tmp_path):
 
 def test_food_file_with_negative_mass(capsys, tmp_path):
     path = tmp_path / "foods.yaml"
-    path.write_text("foods:\n  peas:\n    split: train\n    levels: {low: 5}\n    components:\n"
+    path.write_text("foods:\n  peas:\n    split: train\n    levels: {low: {pieces: 5}}\n    components:\n"
                     "      - {shape: sphere, radius: [0.004, 0.005], mass: [-0.001, 0.001]}\n")
     code, _, err = run(capsys, "foods", "--foods-file", str(path))
     assert_one_line_error(code, err, "peas", "mass")
@@ -88,5 +90,5 @@ def test_rollout_of_a_quaternion_trajectory_prints_one_json_record(capsys, tmp_p
     for key in ("food", "quantity", "seed", "n_particles", "spilled", "scooped", "spoon_coverage", "spillage",
                 "scoop_failure", "scoop_success", "ik_failures"):
         assert key in record
-    assert record["scoop_failure"] and record["spilled"] == 0 and record["n_particles"] == 10
+    assert record["scoop_failure"] and record["spilled"] == 0 and record["n_particles"] == load_foods().get("orange").levels["medium"].pieces
     assert np.load(saved).shape == (10, 9)

@@ -6,7 +6,10 @@ import numpy as np
 import pytest
 
 from grits_lab.errors import ConfigError, InputError
-from grits_lab.sim.foods import SHAPES, load_foods, primitive_food, sample_particles
+from dataclasses import replace
+
+from grits_lab.sim.foods import SHAPES, bowl_volume, fill_count, level_count, load_foods, primitive_food, sample_particles
+from grits_lab.sim.shapes import BowlGeometry
 
 TRAIN = {"brown_rice", "soybeans", "mung_beans", "chocolate_balls", "dried_jujube", "orange"}
 UNSEEN = {"sago", "red_bean", "mentos", "marshmallow", "fudge", "penne", "prune", "ramen_snack", "nuts", "milk_tea"}
@@ -22,10 +25,6 @@ def test_packaged_library_has_the_papers_foods_splits_and_levels():
         assert len(lib.get(name).levels) == 2, name
     shapes = {c.shape for f in lib.foods.values() for c in f.components}
     assert shapes == set(SHAPES)
-    # Counts grow with the level.
-    for name, food in lib.foods.items():
-        counts = list(food.levels.values())
-        assert counts == sorted(counts), name
 
 
 def test_recipes_reflect_the_food():
@@ -49,7 +48,7 @@ GOOD = """
 foods:
   peas:
     split: train
-    levels: {low: 10}
+    levels: {low: {pieces: 10}}
     components:
       - shape: sphere
         radius: [0.004, 0.005]
@@ -95,5 +94,37 @@ def test_sampling_is_seeded_and_splits_counts():
 def test_primitive_food_follows_the_authors_ranges(shape):
     spec, count = primitive_food(shape, np.random.default_rng(0))
     c = spec.components[0]
-    assert c.shape == shape and count % 16 == 0 and count >= 16
-    assert 0.0025 <= c.radius[0] <= 0.010 and 0.0001 <= c.mass[0] <= 0.005
+    assert c.shape == shape and count >= 1
+    assert 0.0045 <= c.radius[0] <= 0.010 and 0.0001 <= c.mass[0] <= 0.005
+    height = spec.levels["trial"].fill_height
+    assert 0.012 <= height <= 0.032
+    assert count == fill_count(spec, height)
+
+
+def test_fill_count_follows_the_bowl_volume_and_the_grain_size():
+    food = load_foods().get("mung_beans")
+    # Twice the height holds more than twice the volume in a bowl that widens upwards.
+    assert fill_count(food, 0.02) > 2 * fill_count(food, 0.01)
+    # Coarse-graining by k divides the count by k^3 for the same volume.
+    coarse = replace(food, components=[replace(food.components[0], coarse_grain=2 * food.components[0].coarse_grain)])
+    assert abs(fill_count(coarse, 0.028) - fill_count(food, 0.028) / 8) <= 1
+    # A cylinder of height h and radius r of volume V: spheres of radius a fill it with about 0.6 V / (4/3 pi a^3).
+    bowl = BowlGeometry(floor_radius=0.05, rim_radius=0.05)
+    assert bowl_volume(bowl, 0.02) == pytest.approx(np.pi * 0.05**2 * 0.02)
+
+
+def test_levels_are_physical_amounts_that_grow():
+    lib = load_foods()
+    for name, food in lib.foods.items():
+        counts = [level_count(food, name, lv) for lv in food.levels]
+        assert counts == sorted(counts), name
+        small = food.success_rule == "coverage"
+        for amount in food.levels.values():
+            assert (amount.fill_height is not None) == small and (amount.pieces is not None) == (not small), name
+
+
+def test_a_level_must_be_exactly_one_amount(tmp_path):
+    with pytest.raises(ConfigError, match="exactly one of fill_height"):
+        load_foods(_write(tmp_path, GOOD.replace("MASS_LO", "0.0005").replace("{pieces: 10}", "{pieces: 10, fill_height: 0.01}")))
+    with pytest.raises(ConfigError, match="coarse_grain"):
+        load_foods(_write(tmp_path, GOOD.replace("MASS_LO", "0.0005").replace("        mass:", "        coarse_grain: 0.5\n        mass:")))
