@@ -27,6 +27,9 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     tmp_path = Path(tmp)
     try:
         yield tmp_path
+        # mkstemp creates 0600; give the file the mode an ordinary write would, so a group that
+        # shares the results disk can read reports, records and checkpoints.
+        os.chmod(tmp_path, _ordinary_mode(path))
         os.replace(tmp_path, path)
     except OSError as exc:
         raise StorageError(_describe(exc, path)) from None
@@ -76,6 +79,28 @@ def ensure_writable_dir(path: str | Path) -> Path:
     except OSError as exc:
         raise StorageError(_describe(exc, path)) from None
     return path
+
+
+def _ordinary_mode(path: Path) -> int:
+    """The permission bits `open(path, "w")` would leave: the existing file's, else 0666 less the umask."""
+    try:
+        return path.stat().st_mode & 0o7777
+    except OSError:
+        return 0o666 & ~_umask()
+
+
+def _umask() -> int:
+    # Read, not set-and-restore, where the platform allows: setting it briefly to 0 would race with
+    # files other threads create in that moment.
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def _describe(exc: OSError, path: Path) -> str:
