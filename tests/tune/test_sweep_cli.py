@@ -83,3 +83,19 @@ def test_changed_search_space_on_an_existing_study_is_rejected(sweep_file, capsy
     capsys.readouterr()
     assert main(["sweep", str(sweep_file(n_trials=1, rho={"high": 9.0})), "--no-progress"]) == 2
     assert "different search space" in one_error_line(capsys)
+
+
+def test_a_journal_with_a_torn_last_record_is_cut_back_and_the_sweep_resumes(sweep_file, capsys):
+    config = sweep_file(n_trials=2)
+    assert main(["sweep", str(config), "--no-progress", "--no-plots"]) == 0
+    journal = config.parent / "results" / "study" / "journal.log"
+    whole = journal.read_bytes()
+    with open(journal, "ab") as fh:  # what a kill or a full disk mid-append leaves
+        fh.write(b'{"op_code": 5, "worker_id": "dead", "trial_id": 1, "us')
+    capsys.readouterr()
+    assert main(["sweep", str(sweep_file(n_trials=3)), "--no-progress", "--no-plots"]) == 0
+    captured = capsys.readouterr()
+    assert "half-written record" in captured.err and "trials: {'COMPLETE': 3}" in captured.out
+    assert journal.read_bytes().startswith(whole)
+    # and every later run reads it
+    assert main(["sweep", str(sweep_file(n_trials=3)), "--report-only", "--no-plots"]) == 0
