@@ -99,3 +99,19 @@ def test_a_journal_with_a_torn_last_record_is_cut_back_and_the_sweep_resumes(swe
     assert journal.read_bytes().startswith(whole)
     # and every later run reads it
     assert main(["sweep", str(sweep_file(n_trials=3)), "--report-only", "--no-plots"]) == 0
+
+
+@pytest.mark.parametrize("validation, key, name", [
+    ({"foods": ["soybeans"], "levels": ["medum"]}, "validation.levels", "medum"),
+    ({"foods": ["soybean"], "levels": ["low"]}, "validation.foods", "soybean"),
+])
+def test_validation_names_the_food_library_lacks_are_refused_before_the_study_exists(
+        sweep_file, tmp_path, capsys, validation, key, name):
+    from sweep_helpers import REPO
+
+    config = sweep_file(evaluator="grits", validation=validation,
+                        evaluation={"config": str(REPO / "experiments" / "evaluate_quick.yaml"), "checkpoints": []})
+    assert main(["sweep", str(config), "--no-progress"]) == 2
+    line = one_error_line(capsys)
+    assert f"`{key}`" in line and repr(name) in line
+    assert not (tmp_path / "results").exists()
