@@ -26,7 +26,9 @@ from tqdm import tqdm
 from grits_lab.config import config_fingerprint, config_from_dict, config_to_dict
 from grits_lab.errors import ConfigError, InputError, StorageError
 from grits_lab.evaluation.config import EvaluationConfig, load_evaluation_config
-from grits_lab.evaluation.methods import METHODS, file_digest, guidance_columns, method_checkpoints
+from grits_lab.evaluation.methods import (
+    METHODS, check_method_checkpoints, file_digest, guidance_columns, method_checkpoints,
+)
 from grits_lab.io import ensure_writable_dir, save_parquet_atomic, write_json_atomic, write_text_atomic
 from grits_lab.records import RECORD_COLUMNS
 from grits_lab.runners import EpisodeResult, EpisodeSpec, make_executor
@@ -204,6 +206,8 @@ def evaluate(config: EvaluationConfig, *, progress: bool = True, fresh: bool = F
     """Run (or resume) the evaluation described by `config`; returns every record of the run directory."""
     keys = episode_keys(config)
     paths = {m: method_checkpoints(m, config.checkpoints) for m in config.methods}
+    for method in config.methods:
+        check_method_checkpoints(method, paths[method])
     digests = checkpoint_digests(paths)
     specs = build_specs(config, keys, paths=paths, digests=digests)
     if executor is None:

@@ -68,11 +68,11 @@ def train_predictor(config: PredictorConfig, restart: bool = False, progress: bo
     from tqdm import tqdm
 
     torch.set_num_threads(config.train.num_threads)
-    out = ensure_writable_dir(run_dir(config))
-    last_path, best_path = out / "last.pt", out / "best.pt"
     fingerprint = _resume_fingerprint(config)
     dataset_dir = Path(config.data.dataset)
-    index = check_spillage_dataset(dataset_dir)
+    index = check_spillage_dataset(dataset_dir, config.model.chunk_len)
+    out = ensure_writable_dir(run_dir(config))
+    last_path, best_path = out / "last.pt", out / "best.pt"
     cloud_key = CLOUD_KEYS[config.data.cloud_source]
     split = split_episodes(index, config.data.val_fraction, config.data.split_seed, config.data.holdout_shape)
 
@@ -154,8 +154,8 @@ def predict_chunks(predictor: TrainedPredictor, dataset_dir: str | Path, files: 
     subsets are fixed by the predictor's seed, so two calls give the same frame.
     """
     dataset_dir = Path(dataset_dir)
-    index = check_spillage_dataset(dataset_dir)
     cfg = predictor.config
+    index = check_spillage_dataset(dataset_dir, cfg.model.chunk_len, key="the predictor's model.chunk_len")
     dataset = SpillageChunkDataset(
         dataset_dir,
         sorted(index["file"].tolist()) if files is None else list(files),

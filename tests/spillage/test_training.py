@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -110,3 +111,14 @@ def test_cli_trains_evaluates_and_reports_bad_input_in_one_line(tmp_path, tiny_d
     (demos / "dataset.yaml").write_text("kind: demos\n")
     assert main(["train", "predictor", str(cfg_path), "--restart", "--dataset", str(demos)]) == 2
     assert "kind 'spillage'" in capsys.readouterr().err
+
+
+def test_a_predictor_chunk_len_the_dataset_was_not_collected_with_is_refused_before_training(tmp_path, tiny_dataset):
+    import shutil
+
+    dataset = Path(shutil.copytree(tiny_dataset, tmp_path / "d12"))  # collected with chunk_len 12
+    manifest = yaml.safe_load((dataset / "dataset.yaml").read_text())
+    (dataset / "dataset.yaml").write_text(yaml.safe_dump({**manifest, "config": {"chunk_len": 12}}))
+    with pytest.raises(ConfigError, match=r"`model.chunk_len` is 8, .* collected with chunk_len 12"):
+        train_predictor(_config(tmp_path, dataset, epochs=1, chunk_len=8), progress=False)
+    assert not (tmp_path / "runs").exists()
