@@ -6,6 +6,7 @@ import contextlib
 import errno
 import io
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -50,8 +51,25 @@ def write_text_atomic(path: str | Path, text: str) -> None:
     write_bytes_atomic(path, text.encode())
 
 
+def to_json(obj: Any, indent: int | None = 2, sort_keys: bool = False) -> str:
+    """Strict JSON text: NaN and infinities (which json.dumps writes as bare, invalid `NaN`) become null."""
+    return json.dumps(_finite_or_none(obj), indent=indent, sort_keys=sort_keys, default=str, allow_nan=False)
+
+
+def _finite_or_none(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _finite_or_none(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite_or_none(v) for v in obj]
+    if hasattr(obj, "dtype") and hasattr(obj, "item") and getattr(obj, "ndim", 1) == 0:
+        obj = obj.item()  # numpy and torch scalars
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
 def write_json_atomic(path: str | Path, obj: Any) -> None:
-    write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=True, default=str) + "\n")
+    write_text_atomic(path, to_json(obj, indent=2, sort_keys=True) + "\n")
 
 
 def save_npz_atomic(path: str | Path, compress: bool = True, **arrays: Any) -> None:

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
 
 from grits_lab.errors import InputError
+from grits_lab.io import to_json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -86,7 +86,7 @@ def _rollout(args: argparse.Namespace) -> int:
     summary = record.summary()
     summary["spilled_over_time"] = record.spilled_over_time
     if args.json:
-        print(json.dumps(summary))
+        print(to_json(summary, indent=None))
     else:
         for key in ("food", "split", "quantity", "seed", "n_particles", "spilled", "scooped", "spoon_coverage",
                     "scoop_success", "spillage", "scoop_failure", "first_spill_step", "ik_failures", "n_steps", "wall_time_s"):
@@ -138,7 +138,7 @@ def _scene(args: argparse.Namespace) -> int:
         env.close()
     scene["seed"] = args.seed
     if args.json:
-        print(json.dumps(scene))
+        print(to_json(scene, indent=None))
     else:
         for key, value in scene.items():
             if key != "cameras":
@@ -156,7 +156,7 @@ def _foods(args: argparse.Namespace) -> int:
              "shapes": sorted({c.shape for c in f.components}), "description": f.description}
             for name, f in library.foods.items()]
     if args.json:
-        print(json.dumps({"foods": rows}))
+        print(to_json({"foods": rows}, indent=None))
     else:
         for r in rows:
             levels = ", ".join(f"{k}={v}" for k, v in r["levels"].items())

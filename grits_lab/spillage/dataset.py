@@ -18,7 +18,7 @@ import torch
 from torch.utils.data import IterableDataset
 
 from grits_lab.config import load_yaml
-from grits_lab.data.format import EPISODE_DIR, MANIFEST_FILE, load_index, read_episode
+from grits_lab.data.format import EPISODE_DIR, MANIFEST_FILE, load_index, read_episode, require_finite
 from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import ConfigError, InputError, StorageError
 from grits_lab.seeding import derive_seed, make_rng
@@ -96,6 +96,7 @@ def load_chunks(path: Path, cloud_key: str) -> dict[str, np.ndarray]:
     n_chunks = len(arrays["chunk_start"])
     if len(arrays["chunk_spilled"]) != n_chunks or len(arrays[cloud_key]) != n_chunks:
         raise StorageError(f"{path}: chunk_start, chunk_spilled and {cloud_key} differ in length")
+    require_finite(arrays, path, ("trajectory", cloud_key))
     return {
         "trajectory": arrays["trajectory"].astype(np.float32),
         "chunk_start": arrays["chunk_start"].astype(np.int64),
@@ -124,7 +125,11 @@ def subsample_points(cloud: np.ndarray, n: int | None, rng: np.random.Generator)
 
 def fit_normalizers(dataset_dir: Path, files: list[str], cloud_key: str, scale: float, max_cloud_episodes: int = 64) -> tuple[ActionNormalizer, CloudNormalizer]:
     """Action normalizer on every training waypoint; cloud centre on the bowl points of a few training clouds."""
-    trajectories = [read_episode(dataset_dir / f, keys=["trajectory"])[0]["trajectory"] for f in files]
+    trajectories = []
+    for f in files:
+        arrays = read_episode(dataset_dir / f, keys=["trajectory"])[0]
+        require_finite(arrays, dataset_dir / f)
+        trajectories.append(arrays["trajectory"])
     action = ActionNormalizer().fit(np.concatenate(trajectories, axis=0))
     step = max(1, len(files) // max_cloud_episodes)
     clouds = [read_episode(dataset_dir / f, keys=[cloud_key])[0][cloud_key][:1].astype(np.float32) for f in files[::step]]

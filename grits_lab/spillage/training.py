@@ -30,6 +30,7 @@ from grits_lab.spillage.config import PredictorConfig
 from grits_lab.spillage.dataset import CLOUD_KEYS, SpillageChunkDataset, check_spillage_dataset, fit_normalizers, split_episodes
 from grits_lab.spillage.metrics import classification_report
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
+from grits_lab.training.metrics_log import require_finite_loss
 
 
 def run_dir(config: PredictorConfig) -> Path:
@@ -111,6 +112,7 @@ def train_predictor(config: PredictorConfig, restart: bool = False, progress: bo
         bar = tqdm(total=n_train, desc=f"epoch {epoch + 1}/{config.train.epochs}", unit="chunk", disable=not progress, leave=False)
         for traj, cloud, label in _loader(train_set, config.train.batch_size):
             loss = torch.nn.functional.cross_entropy(model(traj, cloud), label)
+            require_finite_loss(loss, f"epoch {epoch + 1}, chunk {seen + len(label)} of {n_train}", last_path)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
