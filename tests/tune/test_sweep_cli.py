@@ -115,3 +115,12 @@ def test_validation_names_the_food_library_lacks_are_refused_before_the_study_ex
     line = one_error_line(capsys)
     assert f"`{key}`" in line and repr(name) in line
     assert not (tmp_path / "results").exists()
+
+
+def test_the_summary_names_only_the_files_it_wrote(sweep_file, tmp_path, capsys):
+    assert main(["sweep", str(sweep_file(n_trials=2)), "--no-progress", "--no-plots"]) == 0
+    line = next(l for l in capsys.readouterr().out.splitlines() if l.startswith("outputs in "))
+    listed = line.split(": ", 1)[1].split(", ")
+    folder = tmp_path / "results" / "study"
+    assert "pareto.png" not in listed and "importance.png" not in listed
+    assert all((folder / name).exists() for name in listed) and "trials.csv" in listed
