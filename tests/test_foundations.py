@@ -102,3 +102,19 @@ def test_a_full_disk_is_one_clear_error_and_leaves_the_previous_file_intact(tmp_
     with pytest.raises(StorageError, match="no space left on device"):
         write_episode(tmp_path, "ep_a", {"x": np.zeros(3)}, {})
     assert not (tmp_path / "episodes" / "ep_a.npz").exists()
+
+
+def test_atomic_writes_get_the_mode_an_ordinary_write_gets(tmp_path):
+    old = os.umask(0o027)  # a group-shared results disk
+    try:
+        write_text_atomic(tmp_path / "report.html", "<html/>")
+        with open(tmp_path / "plain.txt", "w") as fh:
+            fh.write("x")
+    finally:
+        os.umask(old)
+    mode = lambda p: p.stat().st_mode & 0o777  # noqa: E731
+    assert mode(tmp_path / "report.html") == mode(tmp_path / "plain.txt") == 0o640
+    # an existing file keeps its mode, as it does under an ordinary write
+    os.chmod(tmp_path / "report.html", 0o664)
+    write_text_atomic(tmp_path / "report.html", "<html>again</html>")
+    assert mode(tmp_path / "report.html") == 0o664

@@ -50,6 +50,27 @@ def data_code_hash() -> str:
     return digest.hexdigest()[:16]
 
 
+def existing_manifest(out_dir: str | Path, kind: str, identity: Any) -> dict[str, Any] | None:
+    """The manifest of the dataset at `out_dir` (None: no dataset there yet); writes nothing.
+
+    A dataset made from another config (or of another kind) is refused: resuming it would mix two.
+    """
+    manifest_path = Path(out_dir) / MANIFEST_FILE
+    if not manifest_path.exists():
+        return None
+    try:
+        manifest = yaml.safe_load(manifest_path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise StorageError(f"unreadable manifest {manifest_path}: {exc}") from None
+    fingerprint = config_fingerprint(identity)
+    if manifest.get("fingerprint") != fingerprint or manifest.get("kind") != kind:
+        raise StorageError(
+            f"{out_dir} holds a {manifest.get('kind')} dataset made with a different config "
+            f"(fingerprint {manifest.get('fingerprint')} vs {fingerprint}); choose another output or remove it"
+        )
+    return manifest
+
+
 class DatasetWriter:
     """Owns one dataset directory: manifest, episode files, failure records and the index.
 
@@ -58,20 +79,11 @@ class DatasetWriter:
     """
 
     def __init__(self, out_dir: str | Path, kind: str, identity: Any):
+        manifest = existing_manifest(out_dir, kind, identity)
         self.out_dir = ensure_writable_dir(out_dir)
         self.kind = kind
         self.fingerprint = config_fingerprint(identity)
-        manifest_path = self.out_dir / MANIFEST_FILE
-        if manifest_path.exists():
-            try:
-                manifest = yaml.safe_load(manifest_path.read_text()) or {}
-            except yaml.YAMLError as exc:
-                raise StorageError(f"unreadable manifest {manifest_path}: {exc}") from None
-            if manifest.get("fingerprint") != self.fingerprint or manifest.get("kind") != kind:
-                raise StorageError(
-                    f"{self.out_dir} holds a {manifest.get('kind')} dataset made with a different config "
-                    f"(fingerprint {manifest.get('fingerprint')} vs {self.fingerprint}); choose another output or remove it"
-                )
+        if manifest is not None:
             self.manifest = manifest
             code = data_code_hash()
             if manifest.get("code_hash") not in (None, code):

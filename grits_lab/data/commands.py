@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 from typing import Any
+
+from grits_lab.io import to_json
 
 
 def register(subparsers: Any) -> None:
@@ -50,7 +51,7 @@ def _collect(args: argparse.Namespace) -> int:
     if args.serial:
         config.executor.backend = "serial"
     summary = run_collection(config, progress=not args.no_progress)
-    print(json.dumps(summary, indent=2))
+    print(to_json(summary))
     return 0
 
 
@@ -58,5 +59,5 @@ def _info(args: argparse.Namespace) -> int:
     from grits_lab.data.info import dataset_summary, format_summary
 
     summary = dataset_summary(args.path)
-    print(json.dumps(summary, indent=2) if args.json else format_summary(summary))
+    print(to_json(summary) if args.json else format_summary(summary))
     return 0

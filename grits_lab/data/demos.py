@@ -82,10 +82,11 @@ def plan_demos(config: DemosConfig) -> list[EpisodeSpec]:
     """One spec per (food, level, bowl configuration), seeds derived from the root seed."""
     from grits_lab.config import config_from_dict
     from grits_lab.sim.config import SimConfig
-    from grits_lab.sim.foods import load_foods
+    from grits_lab.sim.foods import check_food_names, load_foods
 
     sim = config_from_dict(SimConfig, config.sim, "sim")
     library = load_foods(sim.foods_file)
+    check_food_names(library, config.foods, config.levels)
     specs = []
     # Bowl configuration outermost, so that a `max_episodes` cap still covers every food and level.
     for b in range(config.bowl_configs):

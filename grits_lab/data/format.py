@@ -58,6 +58,17 @@ def read_episode(path: str | Path, keys: Iterable[str] | None = None) -> tuple[d
     return arrays, meta
 
 
+def require_finite(arrays: dict[str, np.ndarray], path: str | Path, keys: Iterable[str] | None = None) -> None:
+    """Refuse an episode whose floating arrays (all, or `keys`) hold NaN or infinity, naming the file."""
+    for key in arrays if keys is None else keys:
+        value = arrays[key]
+        if np.issubdtype(value.dtype, np.floating):
+            bad = int(value.size - np.count_nonzero(np.isfinite(value)))
+            if bad:
+                raise StorageError(f"{path}: `{key}` holds {bad} non-finite value(s) (NaN or inf); "
+                                   "regenerate or remove this episode")
+
+
 def read_meta(path: str | Path) -> dict[str, Any]:
     return read_episode(path, keys=())[1]
 

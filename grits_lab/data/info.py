@@ -50,6 +50,9 @@ def dataset_summary(path: str | Path) -> dict[str, Any]:
             for c in mechanisms
         }
     summary = manifest.get("summary") or {}
+    short = _short_of(summary, out)
+    if out["status"] == "complete" and short:
+        out["status"] = f"incomplete ({short}; run the same collect command again to regenerate)"
     if "acceptance_rate" in summary:
         out["acceptance_rate"] = summary["acceptance_rate"]
     return out
@@ -64,3 +67,17 @@ def format_summary(summary: dict[str, Any]) -> str:
         else:
             lines.append(f"{key:<26} {value}")
     return "\n".join(lines)
+
+
+def _short_of(recorded: dict[str, Any], found: dict[str, Any]) -> str:
+    """What the files on disk lack against the collection's own record of what it wrote ("" if nothing)."""
+    targets = recorded.get("targets") or {}
+    if targets:  # a balanced spillage dataset: every (shape, label) bucket is full
+        have = found.get("by_shape_label", {})
+        gaps = [f"{bucket} has {have.get(bucket, 0)} of {int(want)}" for bucket, want in targets.items()
+                if have.get(bucket, 0) < int(want)]
+        return "; ".join(gaps)
+    want = recorded.get("requested")
+    if want is not None and found["episodes"] < int(want):
+        return f"{found['episodes']} of {int(want)} episodes on disk"
+    return ""

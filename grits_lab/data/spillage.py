@@ -296,6 +296,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
 
     # Accepted trials whose files are gone (writer.finished() removes damaged files) are re-run
     # from their seeds; the simulation is deterministic, so they come back identical.
+    start = time.perf_counter()  # regenerating lost trials is work of this run too
     missing = [(e["shape"], int(e["index"])) for cid, e in logged.items() if e.get("accepted") and cid not in on_disk]
     while missing or executor.pending():
         while missing and executor.capacity() > 0:
@@ -307,7 +308,6 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
                 writer.write_failure(result.episode_id, failure_record(result))
 
     in_flight: dict[str, str] = {}
-    start = time.perf_counter()
     try:
         while not acceptor.done():
             while executor.capacity() > 0:
@@ -348,7 +348,8 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
         "spill_rate_of_candidates": round(stats["spilled"] / labelled, 4) if labelled else None,
         "wall_time_s_this_time": round(time.perf_counter() - start, 2),
     }
-    writer.finalize(summary, complete=all(acceptor.full(s) for s in config.shapes))
+    on_disk_now = len(list(writer.out_dir.glob("episodes/*.npz")))  # a trial that failed to regenerate is missing
+    writer.finalize(summary, complete=all(acceptor.full(s) for s in config.shapes) and on_disk_now == accepted)
     return summary
 
 

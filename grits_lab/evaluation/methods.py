@@ -113,3 +113,46 @@ def build_controller(name: str, config: Any, paths: dict[str, str], cache: Calla
         policy, predictor, spec.sampler, config.guidance, config.posthoc,
         raw_cloud=(spec.predictor == "predictor_raw"),
     )
+
+
+def check_method_checkpoints(name: str, paths: dict[str, str]) -> None:
+    """Before the first episode: each checkpoint of method `name` is the kind its key says, and a
+    predictor judges chunks as long as the policy executes (ConfigError naming the keys otherwise)."""
+    from grits_lab.config import config_from_dict
+    from grits_lab.training import load_checkpoint
+
+    n_action_steps = None
+    for key, path in paths.items():
+        if key == "demos":
+            continue  # a dataset directory, read by its own loader
+        ckpt = load_checkpoint(path)
+        state = ckpt.get("policy") if isinstance(ckpt, dict) else None
+        if key == "policy" or key == "bc":
+            want_bc = key == "bc"
+            if not isinstance(state, dict) or (state.get("kind") == "bc") != want_bc:
+                kind = "behavior-cloning" if want_bc else "diffusion policy"
+                raise ConfigError(f"`checkpoints.{key}` is not a {kind} checkpoint: {path}")
+            if key == "policy":
+                from grits_lab.policies.diffusion import DiffusionPolicyConfig
+
+                try:
+                    n_action_steps = config_from_dict(DiffusionPolicyConfig, state["config"]).n_action_steps
+                except (ConfigError, KeyError, TypeError):
+                    raise ConfigError(f"`checkpoints.policy` is not a diffusion policy checkpoint: {path}") from None
+    spec = METHODS[name]
+    if spec.predictor is None:
+        return
+    from grits_lab.spillage.checkpoint import read_checkpoint
+
+    try:
+        chunk_len = int(read_checkpoint(paths[spec.predictor])["config"]["model"]["chunk_len"])
+    except StorageError:
+        raise ConfigError(f"`checkpoints.{spec.predictor}` is not a spillage predictor checkpoint: {paths[spec.predictor]}") from None
+    except (KeyError, TypeError, ValueError):
+        chunk_len = 12  # PredictorConfig's default, for a config stored without the key
+    if n_action_steps is not None and chunk_len != n_action_steps:
+        raise ConfigError(
+            f"`checkpoints.{spec.predictor}` judges chunks of {chunk_len} actions, but the policy of "
+            f"`checkpoints.policy` executes {n_action_steps} (n_action_steps); train the predictor with "
+            f"`model.chunk_len: {n_action_steps}` on a dataset collected with `chunk_len: {n_action_steps}`"
+        )

@@ -26,11 +26,14 @@ from tqdm import tqdm
 from grits_lab.config import config_fingerprint, config_from_dict, config_to_dict
 from grits_lab.errors import ConfigError, InputError, StorageError
 from grits_lab.evaluation.config import EvaluationConfig, load_evaluation_config
-from grits_lab.evaluation.methods import METHODS, file_digest, guidance_columns, method_checkpoints
+from grits_lab.evaluation.methods import (
+    METHODS, check_method_checkpoints, file_digest, guidance_columns, method_checkpoints,
+)
 from grits_lab.io import ensure_writable_dir, save_parquet_atomic, write_json_atomic, write_text_atomic
 from grits_lab.records import RECORD_COLUMNS
 from grits_lab.runners import EpisodeResult, EpisodeSpec, make_executor
 from grits_lab.runners.base import Executor
+from grits_lab.runners.config import check_reachable, cluster_address
 from grits_lab.seeding import derive_seed
 
 EPISODE_WORK = "grits_lab.evaluation.episode:evaluation_episode"
@@ -65,10 +68,11 @@ class EpisodeParams:
 def episode_keys(config: EvaluationConfig) -> list[EpisodeKey]:
     """Every (food, level, trial) of the config, with seeds derived from the root seed."""
     from grits_lab.sim import SimConfig
-    from grits_lab.sim.foods import load_foods
+    from grits_lab.sim.foods import check_food_names, load_foods
 
     sim = config_from_dict(SimConfig, config.sim, "sim")
     library = load_foods(sim.foods_file)
+    check_food_names(library, config.foods, config.levels)
     keys = []
     for food in config.foods:
         spec = library.get(food)
@@ -200,12 +204,16 @@ def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], diges
 
 def evaluate(config: EvaluationConfig, *, progress: bool = True, fresh: bool = False, executor: Executor | None = None) -> pd.DataFrame:
     """Run (or resume) the evaluation described by `config`; returns every record of the run directory."""
-    out = ensure_writable_dir(config.output_dir)
-    records_path = out / RECORDS_FILE
     keys = episode_keys(config)
     paths = {m: method_checkpoints(m, config.checkpoints) for m in config.methods}
+    for method in config.methods:
+        check_method_checkpoints(method, paths[method])
     digests = checkpoint_digests(paths)
     specs = build_specs(config, keys, paths=paths, digests=digests)
+    if executor is None:
+        check_reachable(cluster_address(config.executor))
+    out = ensure_writable_dir(config.output_dir)  # only once the run is known to be possible
+    records_path = out / RECORDS_FILE
     write_text_atomic(out / "config.yaml", yaml.safe_dump(config_to_dict(config), sort_keys=False))
     write_json_atomic(out / "provenance.json", provenance(config, paths, digests, len(specs)))
     if fresh and records_path.exists():

@@ -73,24 +73,29 @@ def object_points(
 
 
 def farthest_point_sample(points: np.ndarray, n: int, seed: int = 0, fallback: Sequence[float] | None = None) -> np.ndarray:
-    """Exactly `n` points (n, 3) float32 covering `points` (M, 3) by farthest-point sampling.
+    """Exactly `n` finite points (n, 3) float32 covering `points` (M, 3) by farthest-point sampling.
 
-    The first point is drawn from `seed`, so the sample is reproducible. With fewer than `n`
-    points, all of them are kept and the rest are repeats drawn at random (a set of points, as a
-    PointNet sees it, is unchanged by repeats). With none (object fully hidden), all `n` points
-    sit at `fallback` (e.g. the object's position), or at the origin.
+    The first point is drawn from `seed`, so the sample is reproducible. Non-finite rows are
+    dropped, and exact duplicates (a cloud merged from two cameras, or voxelized, has them) count
+    once. With fewer than `n` distinct points, all of them are kept and the rest are repeats drawn
+    at random (a set of points, as a PointNet sees it, is unchanged by repeats). With none (object
+    fully hidden), all `n` points sit at `fallback` (e.g. the object's position), or at the origin.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    points = points[np.isfinite(points).all(axis=1)]
+    if len(points):
+        _, first = np.unique(points, axis=0, return_index=True)
+        points = points[np.sort(first)]  # input order kept, so a cloud without repeats samples as before
     m = len(points)
     if m == 0:
         where = np.zeros(3) if fallback is None else np.asarray(fallback, dtype=np.float64)
         return np.repeat(where[None], n, axis=0).astype(np.float32)
     rng = make_rng(seed)
-    if m <= n:
-        extra = points[rng.integers(0, m, size=n - m)]
-        return np.concatenate([points, extra]).astype(np.float32)
-    import open3d as o3d
+    if m > n:
+        import open3d as o3d
 
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    sampled = cloud.farthest_point_down_sample(int(n), int(rng.integers(0, m)))
-    return np.asarray(sampled.points, dtype=np.float32)
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+        points = np.asarray(cloud.farthest_point_down_sample(int(n), int(rng.integers(0, m))).points)
+        m = len(points)
+    extra = points[rng.integers(0, m, size=n - m)]
+    return np.concatenate([points, extra]).astype(np.float32)

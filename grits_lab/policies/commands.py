@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
+
+from grits_lab.io import to_json
 
 # subcommand -> (help, example config, module, loader, trainer)
 TRAINERS = {
@@ -35,5 +36,5 @@ def _train(args: argparse.Namespace) -> int:
     module = importlib.import_module(module_name)
     config = getattr(module, loader)(args.config)
     summary = getattr(module, trainer)(config, max_steps=args.max_steps, progress=not args.no_progress, fresh=args.fresh)
-    print(json.dumps(summary, indent=2))
+    print(to_json(summary))
     return 0

@@ -25,7 +25,10 @@ from grits_lab.config import config_fingerprint, config_to_dict, require
 from grits_lab.errors import StorageError
 from grits_lab.io import ensure_writable_dir, write_text_atomic
 from grits_lab.policies.diffusion.dataset import DemoWindowDataset, dataset_fingerprint, list_demo_episodes, split_episodes
-from grits_lab.training import EMA, MetricLogger, load_checkpoint, resolve_device, save_checkpoint, set_torch_threads, warmup_cosine
+from grits_lab.training import (
+    EMA, MetricLogger, load_checkpoint, require_finite_loss, resolve_device, save_checkpoint, set_torch_threads,
+    warmup_cosine,
+)
 
 
 @dataclass
@@ -182,6 +185,7 @@ def train_on_demonstrations(
         while step < total_steps:
             batch = to_torch(train_set.gather(train_set.batch_indices(step, config.batch_size, config.seed)), device)
             loss = policy.compute_loss(batch, gen)  # type: ignore[operator]
+            require_finite_loss(loss, f"step {step + 1}", last_path)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()

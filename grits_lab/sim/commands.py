@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
 
 from grits_lab.errors import InputError
+from grits_lab.io import to_json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -89,7 +89,7 @@ def _rollout(args: argparse.Namespace) -> int:
     summary = record.summary()
     summary["spilled_over_time"] = record.spilled_over_time
     if args.json:
-        print(json.dumps(summary))
+        print(to_json(summary, indent=None))
     else:
         for key in ("food", "split", "quantity", "seed", "n_particles", "spilled", "scooped", "spoon_coverage",
                     "scoop_success", "spillage", "scoop_failure", "first_spill_step", "ik_failures", "n_steps", "wall_time_s"):
@@ -141,7 +141,7 @@ def _scene(args: argparse.Namespace) -> int:
         env.close()
     scene["seed"] = args.seed
     if args.json:
-        print(json.dumps(scene))
+        print(to_json(scene, indent=None))
     else:
         for key, value in scene.items():
             if key != "cameras":
@@ -198,7 +198,7 @@ def _foods(args: argparse.Namespace) -> int:
         library.get(name)  # unknown names fail before any world is built
     rows = level_survey(library, names, seed=args.seed, settle=not args.no_settle, config=SimConfig(foods_file=args.foods_file))
     if args.json:
-        print(json.dumps({"seed": args.seed, "foods": rows}))
+        print(to_json({"seed": args.seed, "foods": rows}, indent=None))
     else:
         for r in rows:
             parts = []

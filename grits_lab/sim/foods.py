@@ -341,3 +341,21 @@ def primitive_food(
     spec = FoodSpec(split="train", levels={"trial": QuantityLevel(fill_height=height)}, components=[comp],
                     success_rule="items" if r >= 0.007 else "coverage", description=f"random {shape} particles")
     return spec, min(level_count(spec, "random", "trial"), MAX_PARTICLES)
+
+
+def check_food_names(library: FoodLibrary, foods: list[str], levels: list[str], key_prefix: str = "",
+                     every_food: bool = False) -> None:
+    """Refuse, naming the key, a food the library lacks or a quantity level no listed food has.
+
+    Foods may define different levels (orange has one), so a level is a typo only when none of
+    `foods` has it; with `every_food` each food must have each level (every pair is an episode).
+    """
+    for food in foods:
+        if food not in library.foods:
+            raise ConfigError(f"`{key_prefix}foods` names {food!r}, which is not in the food library "
+                              f"(foods: {', '.join(sorted(library.foods))})")
+    for level in levels:
+        lacking = [food for food in foods if level not in library.foods[food].levels]
+        if lacking and (every_food or len(lacking) == len(foods)):
+            raise ConfigError(f"`{key_prefix}levels` names {level!r}, which food {lacking[0]!r} does not have "
+                              f"(its levels: {', '.join(library.foods[lacking[0]].levels)})")

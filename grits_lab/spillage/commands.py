@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
+
+from grits_lab.io import to_json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -38,7 +39,7 @@ def _run(args: argparse.Namespace) -> int:
         from grits_lab.spillage.training import train_predictor
 
         result = train_predictor(config, restart=args.restart, progress=not args.no_progress)
-        print(json.dumps(result, indent=2, default=float))
+        print(to_json(result))
         return 0
 
     import torch
@@ -50,5 +51,5 @@ def _run(args: argparse.Namespace) -> int:
     path = run_dir(config) / f"{args.checkpoint}.pt" if args.checkpoint in ("best", "last") else Path(args.checkpoint)
     report = {"checkpoint": str(path), **evaluate_predictor(load_predictor(path), args.eval, n_bins=config.train.ece_bins)}
     write_json_atomic(run_dir(config) / f"eval_{Path(args.eval).name}.json", report)
-    print(json.dumps(report, indent=2))
+    print(to_json(report))
     return 0

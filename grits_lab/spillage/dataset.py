@@ -18,9 +18,9 @@ import torch
 from torch.utils.data import IterableDataset
 
 from grits_lab.config import load_yaml
-from grits_lab.data.format import EPISODE_DIR, MANIFEST_FILE, load_index, read_episode
+from grits_lab.data.format import EPISODE_DIR, MANIFEST_FILE, load_index, read_episode, require_finite
 from grits_lab.data.normalize import ActionNormalizer
-from grits_lab.errors import InputError, StorageError
+from grits_lab.errors import ConfigError, InputError, StorageError
 from grits_lab.seeding import derive_seed, make_rng
 from grits_lab.spillage.model import CloudNormalizer
 
@@ -36,19 +36,30 @@ class EpisodeSplit:
     val: list[str]
 
 
-def check_spillage_dataset(dataset_dir: str | Path) -> Any:
-    """The dataset's index (DataFrame) after checking that it exists and is of kind "spillage"."""
+def check_spillage_dataset(dataset_dir: str | Path, chunk_len: int | None = None, key: str = "model.chunk_len") -> Any:
+    """The dataset's index (DataFrame) after checking that it exists, is of kind "spillage" and,
+    given `chunk_len`, that its labels judge chunks of that many actions (ConfigError naming `key`)."""
     dataset_dir = Path(dataset_dir)
     if not (dataset_dir / EPISODE_DIR).is_dir():
         raise StorageError(f"no spillage dataset at {dataset_dir} (missing {EPISODE_DIR}/); collect one first")
-    manifest = dataset_dir / MANIFEST_FILE
-    if manifest.exists():
-        kind = load_yaml(manifest).get("kind")
+    manifest_path = dataset_dir / MANIFEST_FILE
+    manifest = load_yaml(manifest_path) if manifest_path.exists() else {}
+    if manifest_path.exists():
+        kind = manifest.get("kind")
         if kind != "spillage":
             raise InputError(f"{dataset_dir} is a dataset of kind {kind!r}; the predictor trains on kind 'spillage'")
     index = load_index(dataset_dir)
     if len(index) == 0:
         raise StorageError(f"the spillage dataset at {dataset_dir} holds no episodes")
+    if chunk_len is not None:
+        collected = set(map(int, index["chunk_len"].unique())) if "chunk_len" in index.columns else set()
+        if not collected and isinstance(manifest.get("config"), dict) and "chunk_len" in manifest["config"]:
+            collected = {int(manifest["config"]["chunk_len"])}
+        if collected and collected != {chunk_len}:
+            raise ConfigError(
+                f"`{key}` is {chunk_len}, but the spillage dataset at {dataset_dir} was collected with "
+                f"chunk_len {', '.join(map(str, sorted(collected)))}: its labels judge chunks of that many actions"
+            )
     return index
 
 
@@ -85,6 +96,7 @@ def load_chunks(path: Path, cloud_key: str) -> dict[str, np.ndarray]:
     n_chunks = len(arrays["chunk_start"])
     if len(arrays["chunk_spilled"]) != n_chunks or len(arrays[cloud_key]) != n_chunks:
         raise StorageError(f"{path}: chunk_start, chunk_spilled and {cloud_key} differ in length")
+    require_finite(arrays, path, ("trajectory", cloud_key))
     return {
         "trajectory": arrays["trajectory"].astype(np.float32),
         "chunk_start": arrays["chunk_start"].astype(np.int64),
@@ -113,7 +125,11 @@ def subsample_points(cloud: np.ndarray, n: int | None, rng: np.random.Generator)
 
 def fit_normalizers(dataset_dir: Path, files: list[str], cloud_key: str, scale: float, max_cloud_episodes: int = 64) -> tuple[ActionNormalizer, CloudNormalizer]:
     """Action normalizer on every training waypoint; cloud centre on the bowl points of a few training clouds."""
-    trajectories = [read_episode(dataset_dir / f, keys=["trajectory"])[0]["trajectory"] for f in files]
+    trajectories = []
+    for f in files:
+        arrays = read_episode(dataset_dir / f, keys=["trajectory"])[0]
+        require_finite(arrays, dataset_dir / f)
+        trajectories.append(arrays["trajectory"])
     action = ActionNormalizer().fit(np.concatenate(trajectories, axis=0))
     step = max(1, len(files) // max_cloud_episodes)
     clouds = [read_episode(dataset_dir / f, keys=[cloud_key])[0][cloud_key][:1].astype(np.float32) for f in files[::step]]

@@ -30,6 +30,7 @@ from grits_lab.spillage.config import PredictorConfig
 from grits_lab.spillage.dataset import CLOUD_KEYS, SpillageChunkDataset, check_spillage_dataset, fit_normalizers, split_episodes
 from grits_lab.spillage.metrics import classification_report
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
+from grits_lab.training.metrics_log import require_finite_loss
 
 
 def run_dir(config: PredictorConfig) -> Path:
@@ -68,11 +69,11 @@ def train_predictor(config: PredictorConfig, restart: bool = False, progress: bo
     from tqdm import tqdm
 
     torch.set_num_threads(config.train.num_threads)
-    out = ensure_writable_dir(run_dir(config))
-    last_path, best_path = out / "last.pt", out / "best.pt"
     fingerprint = _resume_fingerprint(config)
     dataset_dir = Path(config.data.dataset)
-    index = check_spillage_dataset(dataset_dir)
+    index = check_spillage_dataset(dataset_dir, config.model.chunk_len)
+    out = ensure_writable_dir(run_dir(config))
+    last_path, best_path = out / "last.pt", out / "best.pt"
     cloud_key = CLOUD_KEYS[config.data.cloud_source]
     split = split_episodes(index, config.data.val_fraction, config.data.split_seed, config.data.holdout_shape)
 
@@ -111,6 +112,7 @@ def train_predictor(config: PredictorConfig, restart: bool = False, progress: bo
         bar = tqdm(total=n_train, desc=f"epoch {epoch + 1}/{config.train.epochs}", unit="chunk", disable=not progress, leave=False)
         for traj, cloud, label in _loader(train_set, config.train.batch_size):
             loss = torch.nn.functional.cross_entropy(model(traj, cloud), label)
+            require_finite_loss(loss, f"epoch {epoch + 1}, chunk {seen + len(label)} of {n_train}", last_path)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
@@ -154,8 +156,8 @@ def predict_chunks(predictor: TrainedPredictor, dataset_dir: str | Path, files: 
     subsets are fixed by the predictor's seed, so two calls give the same frame.
     """
     dataset_dir = Path(dataset_dir)
-    index = check_spillage_dataset(dataset_dir)
     cfg = predictor.config
+    index = check_spillage_dataset(dataset_dir, cfg.model.chunk_len, key="the predictor's model.chunk_len")
     dataset = SpillageChunkDataset(
         dataset_dir,
         sorted(index["file"].tolist()) if files is None else list(files),

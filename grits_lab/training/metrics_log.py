@@ -8,8 +8,11 @@ never holds two values for one step.
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 from typing import Any
+
+from grits_lab.errors import GritsError
 
 
 class MetricLogger:
@@ -56,3 +59,15 @@ class MetricLogger:
             writer = csv.DictWriter(fh, fieldnames=self.fields)
             writer.writeheader()
             writer.writerows(rows)
+
+
+def require_finite_loss(loss: Any, where: str, checkpoint: Any = None) -> None:
+    """Stop training with one line when the loss is NaN or infinite, before it reaches the weights.
+
+    `where` says when (e.g. "step 120"); `checkpoint` is the last good checkpoint, if any.
+    """
+    value = float(loss.detach()) if hasattr(loss, "detach") else float(loss)
+    if not math.isfinite(value):
+        kept = f"; the last good checkpoint is {checkpoint}" if checkpoint is not None and Path(checkpoint).exists() else ""
+        raise GritsError(f"training loss became {value} at {where}: lower the learning rate or look for "
+                         f"non-finite values in the dataset{kept}")

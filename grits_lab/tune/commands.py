@@ -54,5 +54,5 @@ def _print_summary(summary: dict, out_dir) -> None:
     print(f"defaults  {describe(summary['defaults'])}")
     for note in summary["notes"]:
         print(note)
-    print(f"outputs in {out_dir}: trials.csv, trials.parquet, best.yaml, summary.json, pareto.png, importance.png")
+    print(f"outputs in {out_dir}: {', '.join(summary['files'])}")
     print(f"dashboard: {summary['dashboard']}   (pip install -e '.[dashboard]')")

@@ -11,10 +11,13 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from grits_lab.config import config_fingerprint, load_config, require
 from grits_lab.seeding import derive_seed
+
+if TYPE_CHECKING:
+    from grits_lab.sim.foods import FoodLibrary
 
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
@@ -142,6 +145,12 @@ class ValidationConfig:
         require(len(set(self.levels)) == len(self.levels), "validation.levels", self.levels, "without repeats")
         require(self.trials >= 1, "validation.trials", self.trials, ">= 1")
         require(self.root_seed >= 0, "validation.root_seed", self.root_seed, ">= 0")
+
+    def check_names(self, library: "FoodLibrary") -> None:
+        """Every food exists in `library` and has every level: each (food, level) pair is an episode."""
+        from grits_lab.sim.foods import check_food_names
+
+        check_food_names(library, self.foods, self.levels, key_prefix="validation.", every_food=True)
 
     def episodes(self) -> list[ValidationEpisode]:
         return [

@@ -49,6 +49,7 @@ class GritsEvaluator:
         evaluate = getattr(module, ENTRY_POINT, None)
         if not callable(evaluate):
             raise ConfigError(f"{EVALUATION_MODULE} has no `{ENTRY_POINT}` function; the sweep cannot evaluate GRITS")
+        _check_against_evaluation(config, Path(ref.config), ref.method)
         self._evaluate = evaluate
         self._config_path = Path(ref.config)
         self._method = ref.method
@@ -65,3 +66,21 @@ class GritsEvaluator:
 
     def close(self) -> None:
         pass
+
+
+def _check_against_evaluation(config: StudyConfig, evaluation_config: Path, method: str) -> None:
+    """Before any study exists: the validation episodes are episodes of the evaluation config's
+    food library, the method's checkpoints fit together, and the Ray cluster it runs on answers."""
+    from grits_lab.config import config_from_dict
+    from grits_lab.evaluation.config import load_evaluation_config
+    from grits_lab.evaluation.methods import METHODS, check_method_checkpoints, method_checkpoints
+    from grits_lab.runners.config import check_reachable, cluster_address
+    from grits_lab.sim import SimConfig
+    from grits_lab.sim.foods import load_foods
+
+    evaluation = load_evaluation_config(evaluation_config)
+    config.validation.check_names(load_foods(config_from_dict(SimConfig, evaluation.sim, "sim").foods_file))
+    if method not in METHODS:
+        raise ConfigError(f"`evaluation.method` must be one of {', '.join(METHODS)}. Got {method!r}.")
+    check_method_checkpoints(method, method_checkpoints(method, evaluation.checkpoints))
+    check_reachable(cluster_address(evaluation.executor))

@@ -8,6 +8,7 @@ the outputs of a study run by other machines. The best-parameter file holds only
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import optuna
@@ -116,6 +117,7 @@ def write_outputs(study: optuna.Study, config: StudyConfig, out_dir: Path, stora
                   evaluator_label: str, plots: bool = True) -> dict:
     """Write every output under `out_dir`; return the summary that is also saved as summary.json."""
     out_dir = Path(out_dir)
+    started = time.time()
     frame = trials_frame(study, config)
     write_text_atomic(out_dir / "trials.csv", frame.to_csv(index=False))
     save_parquet_atomic(out_dir / "trials.parquet", frame)
@@ -141,6 +143,9 @@ def write_outputs(study: optuna.Study, config: StudyConfig, out_dir: Path, stora
         summary["notes"].append(plot_tradeoff(study, config, out_dir / "pareto.png", evaluator_label))
         summary["notes"].append(plot_importance(study, config, out_dir / "importance.png"))
     summary["notes"] = [n for n in summary["notes"] if n]
+    # Only what this call wrote: a plot skipped now, or left from an earlier run, is not named.
+    summary["files"] = [name for name in ("trials.csv", "trials.parquet", "best.yaml", "pareto.png", "importance.png")
+                        if (out_dir / name).exists() and (out_dir / name).stat().st_mtime >= started - 1.0] + ["summary.json"]
     write_json_atomic(out_dir / "summary.json", summary)
     return summary
 

@@ -1,20 +1,25 @@
 """Open a study's storage: a crash-safe journal file by default, an RDB or shared journal by URL.
 
 Journal files (Optuna's JournalStorage with a file backend) append one record per operation under
-a file lock: a killed process leaves at most an unfinished trial, never a corrupt study, and
-several processes (or machines on a shared disk) can append to one file. An RDB URL
+a file lock, and several processes (or machines on a shared disk) can append to one file. A
+process killed mid-append, or a full disk, leaves a half-written last record: it is cut back to
+the last complete record, with a warning, before the journal is opened, so the next record is not
+glued onto it and the study keeps its history. An RDB URL
 (postgresql://, mysql://, sqlite:///) goes through SQLAlchemy; PostgreSQL and MySQL serve many
 machines, SQLite suits one writer only. Unreachable storage fails with one line, passwords hidden.
 """
 
 from __future__ import annotations
 
+import json
+import os
 import re
+import sys
 import time
 from pathlib import Path
 
 from optuna.storages import BaseStorage, JournalStorage, RDBStorage
-from optuna.storages.journal import JournalFileBackend
+from optuna.storages.journal import JournalFileBackend, JournalFileSymlinkLock
 
 from grits_lab.errors import StorageError
 from grits_lab.io import ensure_writable_dir
@@ -60,11 +65,55 @@ def _open_journal(path: Path) -> JournalStorage:
         raise StorageError(f"journal storage path {path} is a directory; give a file path such as {path}/journal.log")
     ensure_writable_dir(path.parent if str(path.parent) else Path("."))
     try:
+        repair_journal(path)
         return JournalStorage(JournalFileBackend(str(path)))
     except OSError as exc:
         raise StorageError(f"cannot open journal storage {path}: {exc.strerror or exc}") from None
     except (ValueError, KeyError) as exc:
         raise StorageError(f"journal storage {path} is not a readable Optuna journal: {exc}") from None
+
+
+def repair_journal(path: Path) -> int:
+    """Cut a torn tail off the journal at `path`; return the number of bytes cut (0: it was whole).
+
+    Runs under the journal's own lock, so no worker appends meanwhile. A torn tail is the bytes
+    after the last newline, or a last line that is not a JSON record. A bad record followed by good
+    ones is not a crash's trace but damage this cannot undo, and it is reported with its line.
+    """
+    if not path.is_file() or path.stat().st_size == 0:
+        return 0
+    lock = JournalFileSymlinkLock(str(path))
+    lock.acquire()
+    try:
+        data = path.read_bytes()
+        good = 0  # bytes of complete, readable records from the start
+        lines = data.split(b"\n")
+        complete, tail = lines[:-1], lines[-1]
+        for number, line in enumerate(complete, start=1):
+            if not _is_record(line):
+                if number < len(complete):
+                    raise StorageError(
+                        f"journal storage {path} has an unreadable record on line {number} of {len(complete)}, "
+                        f"followed by others; restore it from a copy or choose another storage"
+                    )
+                tail = line + b"\n" + tail
+                break
+            good += len(line) + 1
+        cut = len(data) - good
+        if cut:
+            os.truncate(path, good)
+            print(f"warning: journal storage {path} ended in a half-written record ({cut} bytes, left by a "
+                  f"killed process or a full disk); cut back to the last complete record", file=sys.stderr)
+        return cut
+    finally:
+        lock.release()
+
+
+def _is_record(line: bytes) -> bool:
+    try:
+        return isinstance(json.loads(line), dict)
+    except ValueError:
+        return False
 
 
 def _open_rdb(url: str, scheme: str, shown: str) -> RDBStorage:

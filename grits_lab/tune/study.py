@@ -67,7 +67,13 @@ class WorkerIdentity:
 
 
 def open_study(config: StudyConfig, storage: BaseStorage) -> optuna.Study:
-    """Create the study (queueing the configured defaults first) or load it and check it matches."""
+    """Create the study (queueing the configured defaults first) or load it and check it matches.
+
+    The creator queues the defaults and then writes the study's attributes, the identity last. A
+    worker that finds the identity missing waits `CREATOR_GRACE_S` for a creator still at work;
+    if it is still missing, the creator died part-way and this worker finishes its job: the
+    defaults are queued where no trial holds them yet, and the attributes are written.
+    """
     directions = [StudyDirection.MAXIMIZE if d == "maximize" else StudyDirection.MINIMIZE
                   for d in config.objective.directions]
     sampler = build_sampler(config.sampler, config.objective.max_spillage)
@@ -77,25 +83,40 @@ def open_study(config: StudyConfig, storage: BaseStorage) -> optuna.Study:
     except DuplicatedStudyError:
         created = False
     study = optuna.load_study(study_name=config.study_name, storage=storage, sampler=sampler)
-    if created:
-        # Only the creator queues the defaults, so workers starting together queue them once.
-        for point in config.enqueue:
-            study.enqueue_trial({"rho": point.rho, "s": point.s},
-                                user_attrs={ENQUEUED_ATTR: True}, skip_if_exists=True)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-            study.set_metric_names(config.objective.value_names)
-        study.set_user_attr(EVALUATOR_ATTR, config.evaluator)
-        study.set_user_attr(IDENTITY_ATTR, config.identity())
-        return study
+    if not created:
+        deadline = time.monotonic() + CREATOR_GRACE_S
+        while IDENTITY_ATTR not in study.user_attrs and time.monotonic() < deadline:
+            time.sleep(0.1)
+    if (created or IDENTITY_ATTR not in study.user_attrs) and \
+            [d.name.lower() for d in study.directions] == config.objective.directions:
+        _finish_creation(study, config)
+    return _checked(study, config)
+
+
+# How long a worker that joins a study without an identity waits for its creator to write it.
+CREATOR_GRACE_S = 5.0
+
+
+def _finish_creation(study: optuna.Study, config: StudyConfig) -> None:
+    """Queue the defaults that no trial holds yet, then write the attributes, the identity last."""
+    for point in config.enqueue:
+        study.enqueue_trial({"rho": point.rho, "s": point.s},
+                            user_attrs={ENQUEUED_ATTR: True}, skip_if_exists=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        study.set_metric_names(config.objective.value_names)
+    study.set_user_attr(EVALUATOR_ATTR, config.evaluator)
+    study.set_user_attr(IDENTITY_ATTR, config.identity())
+
+
+def _checked(study: optuna.Study, config: StudyConfig) -> optuna.Study:
     if [d.name.lower() for d in study.directions] != config.objective.directions:
         raise ConfigError(
             f"study `{config.study_name}` exists with objective directions "
             f"{[d.name.lower() for d in study.directions]}, but this config asks for "
             f"{config.objective.directions}; choose another `study_name`"
         )
-    identity = study.user_attrs.get(IDENTITY_ATTR)
-    if identity is not None and identity != config.identity():
+    if study.user_attrs.get(IDENTITY_ATTR) != config.identity():
         raise ConfigError(
             f"study `{config.study_name}` was created with a different search space, objective, "
             f"episode set or evaluator; resume it with its original sweep file or choose another `study_name`"

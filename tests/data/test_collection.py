@@ -170,9 +170,20 @@ def test_damaged_episode_file_is_reported_and_regenerated(tmp_path, capsys):
     middle = len(data) // 2  # inside an array's compressed bytes: the metadata still reads
     data[middle:middle + 16] = bytes(16)
     victim.write_bytes(bytes(data))
-    run_collection(config, progress=False)
+    summary = run_collection(config, progress=False)
     assert "will be regenerated" in capsys.readouterr().err
+    assert summary["wall_time_s_this_time"] > 0  # the regeneration is this run's work
     arrays, meta = read_episode(victim)
     assert meta == original[victim.name][1]
     for key, value in original[victim.name][0].items():
         np.testing.assert_array_equal(arrays[key], value)
+
+    from grits_lab.data.info import dataset_summary
+
+    assert dataset_summary(config.output)["status"] == "complete"
+    victim.unlink()  # a bucket is now one short of its target
+    status = dataset_summary(config.output)["status"]
+    import re
+
+    found = re.match(r"incomplete \((\w+)/(\d) has (\d+) of (\d+)", status)
+    assert found and int(found[3]) == int(found[4]) - 1, status

@@ -36,3 +36,32 @@ def test_output_made_by_another_config_is_refused(tmp_path, capsys):
     path.write_text(f"kind: spillage\noutput: {tmp_path / 'd'}\n")
     assert main(["collect", str(path), "--serial"]) == 2
     assert "made with a different config" in capsys.readouterr().err
+
+
+@pytest.mark.ray
+@pytest.mark.parametrize("config", ["spillage_quick.yaml", "demos_quick.yaml"])
+def test_collect_on_an_unreachable_ray_cluster_fails_fast_without_an_output(tmp_path, capsys, monkeypatch, config):
+    import socket
+    import time
+    from pathlib import Path
+
+    with socket.socket() as sock:  # a port where nothing listens
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    monkeypatch.setenv("RAY_ADDRESS", f"127.0.0.1:{port}")
+    repo = Path(__file__).resolve().parents[2]
+    start = time.monotonic()
+    assert main(["collect", str(repo / "experiments" / config), "--output", str(tmp_path / "x"), "--no-progress"]) == 2
+    assert time.monotonic() - start < 30
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"cannot connect to the Ray cluster at 127.0.0.1:{port}" in err[0], err
+    assert not (tmp_path / "x").exists()
+
+
+def test_collect_refuses_a_quantity_level_no_food_has_before_writing(tmp_path, capsys):
+    path = tmp_path / "c.yaml"
+    path.write_text(f"kind: demos\nfoods: [soybeans]\nlevels: [low, medum]\noutput: {tmp_path / 'd'}\n")
+    assert main(["collect", str(path), "--serial"]) == 2
+    err = capsys.readouterr().err
+    assert "`levels`" in err and "'medum'" in err and err.count("\n") == 1
+    assert not (tmp_path / "d").exists()

@@ -69,6 +69,31 @@ def test_fps_pads_small_and_empty_sets():
     np.testing.assert_array_equal(empty, np.tile([1, 2, 3], (20, 1)))
 
 
+def test_fps_gives_exactly_n_distinct_points_when_the_input_repeats_points():
+    # a cloud merged from two cameras, or voxelized, holds exact duplicates
+    distinct = make_rng(1).random((100, 3))
+    repeated = distinct[make_rng(2).integers(0, 100, size=5000)]
+    out = farthest_point_sample(repeated, 3000, seed=0)
+    assert out.shape == (3000, 3)
+    assert len(np.unique(out, axis=0)) == len(np.unique(repeated, axis=0))
+
+    many = farthest_point_sample(np.unique(repeated, axis=0)[np.arange(5000) % 90], 64, seed=0)
+    assert many.shape == (64, 3) and len(np.unique(many, axis=0)) == 64
+
+    one = farthest_point_sample(np.tile([[0.1, 0.2, 0.3]], (500, 1)), 64, seed=0)
+    np.testing.assert_allclose(one, np.tile([[0.1, 0.2, 0.3]], (64, 1)), rtol=1e-6)
+
+
+def test_fps_drops_non_finite_points():
+    pts = make_rng(3).random((5000, 3))
+    pts[17] = np.nan
+    pts[42, 1] = np.inf
+    out = farthest_point_sample(pts, 64, seed=0)
+    assert out.shape == (64, 3) and np.isfinite(out).all()
+    nothing_finite = farthest_point_sample(np.full((5, 3), np.nan), 8, fallback=[1, 2, 3])
+    np.testing.assert_array_equal(nothing_finite, np.tile([1, 2, 3], (8, 1)))
+
+
 def test_depth_noise_grows_with_range_and_drops_pixels():
     cfg = DepthNoiseConfig(lateral_px=0.0, edge_dropout=0.0, random_dropout=0.05)
     near = np.full((200, 200), 0.5, np.float32)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -110,3 +111,61 @@ def test_cli_trains_evaluates_and_reports_bad_input_in_one_line(tmp_path, tiny_d
     (demos / "dataset.yaml").write_text("kind: demos\n")
     assert main(["train", "predictor", str(cfg_path), "--restart", "--dataset", str(demos)]) == 2
     assert "kind 'spillage'" in capsys.readouterr().err
+
+
+def test_a_predictor_chunk_len_the_dataset_was_not_collected_with_is_refused_before_training(tmp_path, tiny_dataset):
+    import shutil
+
+    dataset = Path(shutil.copytree(tiny_dataset, tmp_path / "d12"))  # collected with chunk_len 12
+    manifest = yaml.safe_load((dataset / "dataset.yaml").read_text())
+    (dataset / "dataset.yaml").write_text(yaml.safe_dump({**manifest, "config": {"chunk_len": 12}}))
+    with pytest.raises(ConfigError, match=r"`model.chunk_len` is 8, .* collected with chunk_len 12"):
+        train_predictor(_config(tmp_path, dataset, epochs=1, chunk_len=8), progress=False)
+    assert not (tmp_path / "runs").exists()
+
+
+def test_a_non_finite_value_in_the_dataset_is_refused_naming_its_file(tmp_path, tiny_dataset):
+    import shutil
+
+    from grits_lab.data.format import read_episode, write_episode
+    from grits_lab.errors import StorageError
+
+    dataset = Path(shutil.copytree(tiny_dataset, tmp_path / "d"))
+    path = sorted((dataset / "episodes").glob("*.npz"))[5]
+    arrays, meta = read_episode(path)
+    arrays["trajectory"][3, 2] = np.nan
+    write_episode(dataset, meta.pop("episode_id"), arrays, meta)
+    with pytest.raises(StorageError, match=rf"{path.name}: `trajectory` holds 1 non-finite value"):
+        train_predictor(_config(tmp_path, dataset, epochs=1), progress=False)
+
+
+def test_a_loss_that_turns_non_finite_stops_training_with_one_line(tmp_path, tiny_dataset, monkeypatch, capsys):
+    import torch
+
+    real = torch.nn.functional.cross_entropy
+    calls = {"n": 0}
+
+    def diverging(*args, **kwargs):
+        calls["n"] += 1
+        loss = real(*args, **kwargs)
+        return loss * float("nan") if calls["n"] == 3 else loss
+
+    monkeypatch.setattr(torch.nn.functional, "cross_entropy", diverging)
+    cfg_path = tmp_path / "p.yaml"
+    cfg_path.write_text(yaml.safe_dump({
+        "name": "nan", "output_dir": str(tmp_path / "runs"),
+        "model": {"dp3": {"hidden_dims": [16], "out_dim": 16}},
+        "train": {"epochs": 1, "batch_size": 4, "num_threads": 1},
+    }))
+    assert main(["train", "predictor", str(cfg_path), "--no-progress", "--dataset", str(tiny_dataset)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "training loss became nan at epoch 1" in err[0], err
+    assert not (tmp_path / "runs" / "nan" / "last.pt").exists()  # nothing saved from the diverged weights
+
+
+def test_summaries_print_strict_json_without_bare_nan():
+    from grits_lab.io import to_json
+
+    text = to_json({"first_loss": float("nan"), "best": {"val_auroc": np.float32("inf"), "n": 3}})
+    assert json.loads(text) == {"first_loss": None, "best": {"val_auroc": None, "n": 3}}
+    assert "NaN" not in text and "Infinity" not in text

@@ -170,3 +170,27 @@ def test_synthetic_stand_in_is_deterministic_and_guidance_trades_spillage_for_fa
     fail = [episode_probabilities(rho, 30, "soybeans", "high", 100)[1] for rho in (0.0, 1.0, 2.5, 8.0)]
     assert spill == sorted(spill, reverse=True) and fail == sorted(fail)
     assert (evaluator(1.0, 30, "a")["method"] == "synthetic").all()
+
+
+def test_defaults_and_identity_missing_after_the_creator_died_are_written_by_the_next_worker(
+        sweep_file, tmp_path, monkeypatch):
+    import optuna
+
+    from grits_lab.tune import study as study_module
+
+    monkeypatch.setattr(study_module, "CREATOR_GRACE_S", 0.2)
+    config = load_study_config(sweep_file(n_trials=3))
+    journal = tmp_path / "j.log"
+    storage, _ = open_storage(str(journal), journal)
+    # What a creator killed right after creating the study leaves: no defaults, no identity.
+    storage.create_new_study([optuna.study.StudyDirection.MAXIMIZE], config.study_name)
+    study, _ = run_study(config, journal)
+    first = study.get_trials(deepcopy=False)[0]
+    assert (first.params["rho"], first.params["s"]) == (2.5, 30) and first.user_attrs["enqueued"] is True
+    assert study.user_attrs[study_module.IDENTITY_ATTR] == config.identity()
+    # Idempotent: later workers queue them no second time, and the identity is now checked.
+    study, _ = run_study(config, journal, n_trials=4)
+    assert sum((t.params["rho"], t.params["s"]) == (2.5, 30) for t in study.get_trials()) == 1
+    other = load_study_config(sweep_file(n_trials=3, rho={"high": 9.0}))
+    with pytest.raises(Exception, match="different search space"):
+        open_study(other, open_storage(str(journal), journal)[0])

@@ -83,3 +83,44 @@ def test_changed_search_space_on_an_existing_study_is_rejected(sweep_file, capsy
     capsys.readouterr()
     assert main(["sweep", str(sweep_file(n_trials=1, rho={"high": 9.0})), "--no-progress"]) == 2
     assert "different search space" in one_error_line(capsys)
+
+
+def test_a_journal_with_a_torn_last_record_is_cut_back_and_the_sweep_resumes(sweep_file, capsys):
+    config = sweep_file(n_trials=2)
+    assert main(["sweep", str(config), "--no-progress", "--no-plots"]) == 0
+    journal = config.parent / "results" / "study" / "journal.log"
+    whole = journal.read_bytes()
+    with open(journal, "ab") as fh:  # what a kill or a full disk mid-append leaves
+        fh.write(b'{"op_code": 5, "worker_id": "dead", "trial_id": 1, "us')
+    capsys.readouterr()
+    assert main(["sweep", str(sweep_file(n_trials=3)), "--no-progress", "--no-plots"]) == 0
+    captured = capsys.readouterr()
+    assert "half-written record" in captured.err and "trials: {'COMPLETE': 3}" in captured.out
+    assert journal.read_bytes().startswith(whole)
+    # and every later run reads it
+    assert main(["sweep", str(sweep_file(n_trials=3)), "--report-only", "--no-plots"]) == 0
+
+
+@pytest.mark.parametrize("validation, key, name", [
+    ({"foods": ["soybeans"], "levels": ["medum"]}, "validation.levels", "medum"),
+    ({"foods": ["soybean"], "levels": ["low"]}, "validation.foods", "soybean"),
+])
+def test_validation_names_the_food_library_lacks_are_refused_before_the_study_exists(
+        sweep_file, tmp_path, capsys, validation, key, name):
+    from sweep_helpers import REPO
+
+    config = sweep_file(evaluator="grits", validation=validation,
+                        evaluation={"config": str(REPO / "experiments" / "evaluate_quick.yaml"), "checkpoints": []})
+    assert main(["sweep", str(config), "--no-progress"]) == 2
+    line = one_error_line(capsys)
+    assert f"`{key}`" in line and repr(name) in line
+    assert not (tmp_path / "results").exists()
+
+
+def test_the_summary_names_only_the_files_it_wrote(sweep_file, tmp_path, capsys):
+    assert main(["sweep", str(sweep_file(n_trials=2)), "--no-progress", "--no-plots"]) == 0
+    line = next(l for l in capsys.readouterr().out.splitlines() if l.startswith("outputs in "))
+    listed = line.split(": ", 1)[1].split(", ")
+    folder = tmp_path / "results" / "study"
+    assert "pareto.png" not in listed and "importance.png" not in listed
+    assert all((folder / name).exists() for name in listed) and "trials.csv" in listed

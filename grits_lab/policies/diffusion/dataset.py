@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from grits_lab.data.format import INDEX_FILE, load_index, read_episode
+from grits_lab.data.format import INDEX_FILE, load_index, read_episode, require_finite
 from grits_lab.errors import InputError, StorageError
 from grits_lab.policies.diffusion.configuration_diffusion import DiffusionPolicyConfig
 
@@ -89,6 +89,7 @@ class DemoWindowDataset:
             if missing:
                 raise StorageError(f"episode {episode_id} lacks {missing}, needed by obs_encoder.kind={kind!r}")
             arrays, _ = read_episode(path, keys=keys)
+            require_finite(arrays, path)
             self._check(episode_id, arrays)
             if "cloud" in arrays:
                 n = arrays["cloud"].shape[2]

@@ -1,0 +1,40 @@
+"""What `grits-lab evaluate` refuses before the first episode: mismatched or misplaced checkpoints, unknown levels."""
+
+from __future__ import annotations
+
+import pytest
+from eval_helpers import eval_config
+
+from grits_lab.errors import ConfigError
+from grits_lab.evaluation.run import evaluate
+from grits_lab.spillage.checkpoint import read_checkpoint
+from grits_lab.training.checkpoint import save_checkpoint
+
+
+def test_a_predictor_that_judges_other_chunks_than_the_policy_executes_is_refused(models, tmp_path):
+    payload = read_checkpoint(models["predictor"])
+    payload["config"]["model"]["chunk_len"] = 8  # the policy executes 12
+    save_checkpoint(tmp_path / "pred8.pt", payload)
+    config = eval_config(models, tmp_path / "run", methods=["dp", "grits"], checkpoints={"predictor": str(tmp_path / "pred8.pt")})
+    with pytest.raises(ConfigError, match=r"`checkpoints.predictor` judges chunks of 8 actions, .* executes 12"):
+        evaluate(config, progress=False)
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("key, other, kind", [
+    ("predictor", "policy", "spillage predictor"),
+    ("policy", "bc", "diffusion policy"),
+    ("bc", "policy", "behavior-cloning"),
+])
+def test_a_checkpoint_of_another_kind_than_its_key_says_is_refused(models, tmp_path, key, other, kind):
+    config = eval_config(models, tmp_path / "run", methods=["dp", "grits", "bc"], checkpoints={key: models[other]})
+    with pytest.raises(ConfigError, match=rf"`checkpoints.{key}` is not a {kind} checkpoint"):
+        evaluate(config, progress=False)
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_level_no_food_has_is_refused_by_name(models, tmp_path):
+    config = eval_config(models, tmp_path / "run", levels=["low", "medum"])
+    with pytest.raises(ConfigError, match=r"`levels` names 'medum'"):
+        evaluate(config, progress=False)
+    assert not (tmp_path / "run").exists()
