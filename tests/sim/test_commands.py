@@ -92,3 +92,36 @@ def test_rollout_of_a_quaternion_trajectory_prints_one_json_record(capsys, tmp_p
         assert key in record
     assert record["scoop_failure"] and record["spilled"] == 0 and record["n_particles"] == load_foods().get("orange").levels["medium"].pieces
     assert np.load(saved).shape == (10, 9)
+
+
+def _check_level_bands(food: dict) -> None:
+    """The documented bands (grits_lab/sim/foods.yaml): small-particle foods fill the bowl (inner
+    depth 5.9 cm) to >= 40 % at the high level and >= 1 cm at the low level; large pieces lie in
+    >= 2 layers at the high level."""
+    levels = list(food["levels"].values())
+    if food["success_rule"] == "coverage":
+        assert levels[-1]["fill_height_m"] >= 0.4 * 0.059, food["food"]
+        assert levels[0]["fill_height_m"] >= 0.01, food["food"]
+    else:
+        assert levels[-1]["layers"] >= 2.0, food["food"]
+    for level in levels:
+        assert level["fill_height_m"] < 0.065 and level["n_particles"] >= 1  # below the rim
+
+
+def test_foods_json_gives_amount_count_and_settled_fill_height(capsys):
+    code, out, _ = run(capsys, "foods", "--json", "--food", "mung_beans", "--food", "milk_tea", "--food", "mentos")
+    data = json.loads(out)
+    assert code == 0 and [f["food"] for f in data["foods"]] == ["mung_beans", "milk_tea", "mentos"]
+    mung = data["foods"][0]
+    assert mung["levels"]["high"]["amount"] == {"fill_height_m": 0.028} and mung["coarse_grain"] > 1
+    assert data["foods"][2]["levels"]["high"]["amount"]["pieces"] == data["foods"][2]["levels"]["high"]["n_particles"]
+    for food in data["foods"]:
+        _check_level_bands(food)
+
+
+@pytest.mark.slow
+def test_every_food_meets_its_fill_band(capsys):
+    code, out, _ = run(capsys, "foods", "--json")
+    assert code == 0
+    for food in json.loads(out)["foods"]:
+        _check_level_bands(food)

@@ -108,6 +108,27 @@ def test_tipping_the_loaded_spoon_over_the_table_spills(env, scooped):
     assert rec.spillage and rec.spilled >= record.scooped // 2
     assert rec.first_spill_step > len(traj)  # nothing spilled during the scoop itself
     assert rec.spilled_over_time == sorted(rec.spilled_over_time)
+    # It fell off the spoon outside the bowl's footprint, and the record says so.
+    assert rec.spill_mechanisms["off_spoon"] >= rec.spilled - 1 and sum(rec.spill_mechanisms.values()) == rec.spilled
+
+
+@pytest.mark.parametrize("food", ["mung_beans", "brown_rice", "sago"])
+def test_a_full_bowl_holds_its_food_through_a_deep_drag(env, food):
+    """Physics at full-bowl counts: a scoop dug 5 mm above the floor through the high level loses
+    nothing through the bowl's floor or walls, and no grain ends inside the spoon's plate."""
+    env.reset(seed=1, options={"food": food, "level": "high"})
+    traj = nominal_expert_trajectory(env.scene(), env.config.control_hz)
+    record = play_trajectory(env, traj)
+    pos = env.particle_positions() - env.source_bowl_pose()[:3, 3]
+    geometry = env.world.source_geometry
+    r = np.linalg.norm(pos[:, :2], axis=1)
+    in_bowl = r < float(geometry.rim_radius)
+    # Nothing under the floor's top or outside the wall's outer face inside the bowl's height.
+    assert pos[:, 2].min() > geometry.floor_thickness - 0.004
+    wall_outer = geometry.inner_radius_at(pos[:, 2]) + geometry.wall_thickness
+    assert not np.any((pos[:, 2] < geometry.depth) & (r > wall_outer) & (r < geometry.outer_radius + 0.02))
+    assert in_bowl.sum() + record.scooped + record.spilled >= record.n_particles - 1
+    assert record.scooped >= 10
 
 
 def test_a_trajectory_that_never_enters_the_bowl_is_a_scoop_failure(env):
