@@ -140,6 +140,11 @@ class EvaluationConfig:
     cloud: CloudConfig = field(default_factory=CloudConfig)
     num_threads: int = 1  # torch threads per worker
     flush_every: int = 4  # write the records file after this many finished episodes
+    # Also write every episode's scoop chunks (cloud at the chunk's start, its actions, whether
+    # it spilled) as a spillage-kind dataset per method under <output_dir>/rollout_chunks/, the
+    # held-out set on which `grits-lab compare-predictors --eval` scores predictors on what the
+    # policy really does.
+    rollout_chunks: bool = False
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)
 
     def __post_init__(self) -> None:

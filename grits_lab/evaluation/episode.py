@@ -28,8 +28,14 @@ from grits_lab.evaluation.transfer import Obstacle, locate_bowl, plan_transfer, 
 from grits_lab.sim.env import matrix_to_pose9
 
 
-def run_scoop(env: Any, controller: Any, scene: EpisodeScene, history: ObsHistory, settings: Any) -> dict[str, Any]:
-    """Stage 1; returns the scoop's measurements, guidance diagnostics and timings."""
+def run_scoop(env: Any, controller: Any, scene: EpisodeScene, history: ObsHistory, settings: Any,
+              record_chunks: bool = False) -> dict[str, Any]:
+    """Stage 1; returns the scoop's measurements, guidance diagnostics and timings.
+
+    With `record_chunks`, also "chunks": every executed chunk's composite cloud at its start
+    (3, N, 3), its first action's index in the scoop and the spilled count before it, plus the
+    scoop's executed actions (T, 9) (see `rollout_chunk_episode`).
+    """
     cloud_steps = int(getattr(controller, "cloud_steps", 0))
     image_steps = int(getattr(controller, "image_steps", 0))
     n_exec = settings.n_action_steps or getattr(controller, "n_action_steps", None)
@@ -50,8 +56,13 @@ def run_scoop(env: Any, controller: Any, scene: EpisodeScene, history: ObsHistor
     diagnostics: list[dict[str, Any]] = []
     stop_reason = "max_steps"
     last_action = history.ee_pose[-1]
+    executed: list[np.ndarray] = []
+    chunk_log: list[tuple[int, np.ndarray, int]] = []
     while steps < settings.max_steps:
         observe()
+        if record_chunks:
+            chunk_cloud = scene.cloud()  # what the predictor sees when the chunk starts
+            spilled_before = int(env.tracker.history[-1]) if env.tracker.history else 0
         chunk = controller.plan(history, scene)
         if chunk is None:
             stop_reason = "controller_done"
@@ -67,10 +78,13 @@ def run_scoop(env: Any, controller: Any, scene: EpisodeScene, history: ObsHistor
             stop_reason = "policy_holds"
             break
         actions = chunk.actions[: n_exec or len(chunk.actions)]
+        if record_chunks:
+            chunk_log.append((steps, chunk_cloud, spilled_before))
         ended = False
         for i, action in enumerate(actions):
             obs, _, terminated, truncated, _ = env.step(action)
             last_action = action
+            executed.append(np.asarray(action, dtype=np.float32))
             steps += 1
             scene.advance()
             history.append(obs, action)
@@ -101,7 +115,38 @@ def run_scoop(env: Any, controller: Any, scene: EpisodeScene, history: ObsHistor
         "plan_time_mean_s": float(np.mean(plan_times)) if plan_times else 0.0,
         "plan_time_max_s": float(np.max(plan_times)) if plan_times else 0.0,
         "diagnostics": diagnostics,
+        **({"chunks": {"log": chunk_log, "actions": executed, "spilled_over_time": list(env.tracker.history)}} if record_chunks else {}),
     }
+
+
+def rollout_chunk_episode(chunks: dict[str, Any], chunk_len: int, meta: dict[str, Any]) -> dict[str, Any] | None:
+    """A policy rollout's scoop as a spillage-dataset episode (docs/datasets.md, contract 4), or None.
+
+    Arrays: trajectory (T, 9) executed actions; chunk_start (C,) int32; chunk_cloud (C, 3, N, 3)
+    float16, the composite cloud when the chunk started; chunk_spilled (C,) bool, whether the
+    spilled count rose while the chunk's `chunk_len` actions ran. Only whole chunks are kept (the
+    predictor judges `chunk_len` actions); labels come from the simulation's particle states.
+    """
+    actions = np.asarray(chunks["actions"], dtype=np.float32).reshape(-1, 9)
+    spilled = np.asarray(chunks["spilled_over_time"], dtype=np.int64)
+    starts, clouds, labels = [], [], []
+    for start, cloud, before in chunks["log"]:
+        if start + chunk_len > len(actions):
+            continue
+        starts.append(start)
+        clouds.append(np.asarray(cloud, dtype=np.float16))
+        labels.append(bool(spilled[start + chunk_len - 1] > before))
+    if not starts:
+        return None
+    arrays = {
+        "trajectory": actions,
+        "chunk_start": np.asarray(starts, dtype=np.int32),
+        "chunk_cloud": np.stack(clouds),
+        "chunk_spilled": np.asarray(labels, dtype=bool),
+        "spilled_over_time": spilled[: len(actions)].astype(np.int32),
+    }
+    return {"arrays": arrays, "meta": {**meta, "label": int(any(labels)), "chunk_len": int(chunk_len),
+                                       "steps": int(len(actions)), "n_chunks": len(starts)}}
 
 
 def summarize_guidance(diagnostics: list[dict[str, Any]]) -> dict[str, float]:
@@ -165,11 +210,16 @@ def begin_episode(env: Any, builder: Any, *, seed: int, food: str, level: str) -
 
 
 def run_episode(env: Any, controller: Any, config: Any, *, seed: int, food: str, level: str, builder: Any) -> dict[str, Any]:
-    """The whole task for one (method, food, level, seed); returns the metric part of the record."""
+    """The whole task for one (method, food, level, seed); returns the metric part of the record.
+
+    With `config.rollout_chunks`, the record also holds "_chunks": the scoop as a spillage-dataset
+    episode (`rollout_chunk_episode`), which the driver writes and drops from the record.
+    """
     start = time.perf_counter()
     scene, history = begin_episode(env, builder, seed=seed, food=food, level=level)
     n_particles = int(env.metrics()["n_particles"])
-    scoop = run_scoop(env, controller, scene, history, config.scoop)
+    record_chunks = bool(getattr(config, "rollout_chunks", False))
+    scoop = run_scoop(env, controller, scene, history, config.scoop, record_chunks=record_chunks)
     m = scoop["metrics"]
     scoop_time = time.perf_counter() - start
     record: dict[str, Any] = {
@@ -210,6 +260,13 @@ def run_episode(env: Any, controller: Any, config: Any, *, seed: int, food: str,
         "renders": scene.renders,
         "task_success": bool(m["scoop_success"]) and transferred >= needed and spilled_total == 0,
     })
+    final = env.metrics()["spill_mechanisms"]
+    record.update({f"spilled_{k}": int(v) for k, v in final.items()})
+    if record_chunks:
+        n_exec = config.scoop.n_action_steps or getattr(controller, "n_action_steps", None) or 12
+        record["_chunks"] = rollout_chunk_episode(scoop["chunks"], int(n_exec), {
+            "food": food, "level": level, "seed": int(seed), "shape": food, "spilled": int(m["spilled"]),
+            "scooped": int(m["scooped"]), "scoop_success": bool(m["scoop_success"])})
     return record
 
 

@@ -149,15 +149,43 @@ def records_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
     return frame.sort_values(["method", "food", "level", "trial"], kind="stable").reset_index(drop=True)
 
 
+ROLLOUT_CHUNKS_DIR = "rollout_chunks"
+
+
+def write_rollout_chunks(out: Path, record: dict[str, Any], episode: dict[str, Any]) -> Path:
+    """Write one episode's scoop chunks into `out/rollout_chunks/<method>/`, a spillage-kind dataset
+    that `grits-lab compare-predictors --eval` scores; the index is rebuilt after every write."""
+    from grits_lab.data.format import MANIFEST_FILE, rebuild_index, write_episode
+
+    dataset = out / ROLLOUT_CHUNKS_DIR / str(record["method"])
+    if not (dataset / MANIFEST_FILE).exists():
+        dataset.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(dataset / MANIFEST_FILE, yaml.safe_dump({
+            "kind": "spillage", "format_version": 1, "status": "complete", "source": "policy rollouts",
+            "run_id": record.get("run_id"), "method": record["method"],
+            "config": {"chunk_len": int(episode["meta"]["chunk_len"])},
+        }, sort_keys=False))
+    episode_id = f"{record['method']}-{record['food']}-{record['level']}-{int(record['trial'])}"
+    meta = {**episode["meta"], "method": record["method"], "trial": int(record["trial"])}
+    path = write_episode(dataset, episode_id, episode["arrays"], meta)
+    rebuild_index(dataset)
+    return path
+
+
 def run_specs(specs: list[EpisodeSpec], executor: Executor, progress: bool = True, done: list[dict[str, Any]] | None = None,
-              on_flush: Any = None, flush_every: int = 4, desc: str = "evaluate") -> list[dict[str, Any]]:
-    """Run specs on `executor`; `on_flush(rows)` is called every `flush_every` results and at the end."""
+              on_flush: Any = None, flush_every: int = 4, desc: str = "evaluate", on_chunks: Any = None) -> list[dict[str, Any]]:
+    """Run specs on `executor`; `on_flush(rows)` is called every `flush_every` results and at the end;
+    `on_chunks(record, episode)` receives each record's rollout chunks (dropped from the record)."""
     rows = list(done or [])
     bar = tqdm(total=len(specs), desc=desc, disable=not progress, dynamic_ncols=True)
     since = 0
     try:
         for result in executor.map_unordered(specs):
-            rows.append(result_record(result))
+            record = result_record(result)
+            chunks = record.pop("_chunks", None)
+            if chunks is not None and on_chunks is not None:
+                on_chunks(record, chunks)
+            rows.append(record)
             since += 1
             bar.update(1)
             if not result.ok:
@@ -234,7 +262,8 @@ def evaluate(config: EvaluationConfig, *, progress: bool = True, fresh: bool = F
         own = executor is None
         executor = executor or make_executor(config.executor)
         try:
-            run_specs(todo, executor, progress, done, flush, config.flush_every, desc=config.run_id)
+            run_specs(todo, executor, progress, done, flush, config.flush_every, desc=config.run_id,
+                      on_chunks=(lambda record, episode: write_rollout_chunks(out, record, episode)) if config.rollout_chunks else None)
         finally:
             if own:
                 executor.close()

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval_helpers import eval_config
+from eval_helpers import N_POINTS, eval_config
 from grits_lab.errors import ConfigError
 from grits_lab.evaluation.controllers import ObsHistory
 from grits_lab.evaluation.methods import METHODS
@@ -151,3 +151,30 @@ def test_history_gives_the_commanded_actions_and_the_resting_pose_before_the_fir
     history.append({"ee_pose": rest + 0.5}, command)  # the arm lags its command: the command is what was asked
     np.testing.assert_array_equal(history.past_actions(2), np.stack([rest, command]))
     assert history.past_actions(0).shape == (0, 9)
+
+
+def test_rollout_chunks_are_a_dataset_the_predictor_scores(models, tmp_path):
+    """Each DP episode's scoop, cut into the chunks it executed, labelled by the simulation."""
+    from pathlib import Path
+
+    from grits_lab.data.format import load_index, read_episode
+    from grits_lab.spillage.compare import predict_all
+
+    config = eval_config(models, tmp_path, methods=["dp"], rollout_chunks=True)
+    records = evaluate(config, progress=False)
+    assert "_chunks" not in records.columns
+    dataset = tmp_path / "rollout_chunks" / "dp"
+    index = load_index(dataset)
+    assert len(index) == 1 and index["chunk_len"].iloc[0] == 12
+    arrays, meta = read_episode(dataset / index["file"].iloc[0])
+    c = len(arrays["chunk_start"])
+    assert c >= 1 and arrays["chunk_cloud"].shape[:3] == (c, 3, N_POINTS)
+    assert np.all(arrays["chunk_start"] + 12 <= len(arrays["trajectory"]))
+    # The label of a chunk is what the simulation did while it ran.
+    spilled = arrays["spilled_over_time"]
+    for start, label in zip(arrays["chunk_start"], arrays["chunk_spilled"]):
+        before = spilled[start - 1] if start > 0 else 0
+        assert bool(label) == bool(spilled[start + 11] > before)
+    assert meta["label"] == int(arrays["chunk_spilled"].any()) and meta["spilled"] == records.iloc[0]["spilled"]
+    predictions = predict_all({"full": Path(models["predictor"])}, dataset)
+    assert len(predictions) == c and predictions["p_full"].between(0, 1).all()
