@@ -41,6 +41,11 @@ def dataset_summary(path: str | Path) -> dict[str, Any]:
     for column in ("scoop_success", "spilled_any", "label"):
         if column in index.columns and len(index):
             out[f"mean_{column}"] = round(float(index[column].astype(float).mean()), 3)
+    if {"food", "level", "scoop_success", "spilled_any"} <= set(index.columns) and len(index):
+        out["by_food_level"] = {
+            f"{food}/{level}": f"scoop success {int(g['scoop_success'].sum())}/{len(g)}, spilled {int(g['spilled_any'].sum())}/{len(g)}"
+            for (food, level), g in index.groupby(["food", "level"], sort=True)
+        }
     mechanisms = [c for c in index.columns if c.startswith("spilled_") and c != "spilled_any"]
     if mechanisms and len(index):
         total = float(index[mechanisms].to_numpy().sum())
