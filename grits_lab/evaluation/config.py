@@ -32,6 +32,12 @@ class GuidanceSettings:
     gradient: Literal["x0", "xt"] = "x0"
     grad_clip: float | None = None  # per-axis clamp of the gradient (the authors' code clips)
     clip_estimate: bool = False
+    # gradient: update = rho * grad P(spill) (the paper); normalized: rho * grad / ||grad||, so rho
+    # is the step length in normalized action units whatever the predictor (grits_lab/sampling/guidance.py).
+    step: Literal["gradient", "normalized"] = "gradient"
+    # Per plan, also denoise the same noise unguided and record P(spill) of both samples and how
+    # far the executed chunk moved (one more denoising pass per plan).
+    compare_unguided: bool = True
 
     def __post_init__(self) -> None:
         require(self.rho >= 0, "guidance.rho", self.rho, "non-negative")

@@ -125,6 +125,7 @@ class DiffusionController(LearnedController):
             self.sampler = DDIMSampler(scheduler, GuidanceConfig(
                 rho=guidance.rho, threshold=guidance.s, gradient=guidance.gradient,
                 grad_clip=guidance.grad_clip, clip_estimate=guidance.clip_estimate, diagnostics=True,
+                step=guidance.step, compare_unguided=guidance.compare_unguided,
             ))
         elif sampler_kind == "posthoc":
             self.sampler = PostHocSampler(scheduler, posthoc)
@@ -151,7 +152,17 @@ class DiffusionController(LearnedController):
             plan = self.policy.plan(obs, sampler=self.sampler, objective=objective, generator=generator)
         self.plans += 1
         diagnostics = plan.result.summary()
+        if plan.result.unguided is not None:
+            diagnostics["displacement_mm"] = self.executed_displacement_mm(plan.result.unguided, plan.result.sample)
         return Chunk(plan.actions[0], diagnostics, time.perf_counter() - start)
+
+    def executed_displacement_mm(self, unguided: torch.Tensor, guided: torch.Tensor) -> float:
+        """Mean distance (mm) between the spoon positions of the unguided and guided executed chunks, per waypoint."""
+        start = self.policy.config.action_start
+        end = start + self.n_action_steps
+        a = self.policy.action_normalizer.unnormalize(unguided[:, start:end].detach().double())[..., :3]
+        b = self.policy.action_normalizer.unnormalize(guided[:, start:end].detach().double())[..., :3]
+        return float(1000.0 * (a - b).norm(dim=-1).mean())
 
 
 class BCController(LearnedController):

@@ -149,19 +149,36 @@ def rollout_chunk_episode(chunks: dict[str, Any], chunk_len: int, meta: dict[str
                                        "steps": int(len(actions)), "n_chunks": len(starts)}}
 
 
-def summarize_guidance(diagnostics: list[dict[str, Any]]) -> dict[str, float]:
-    """Per-episode means of the sampler's per-plan diagnostics (guided and post-hoc plans)."""
+def summarize_guidance(diagnostics: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per-episode means of the sampler's per-plan diagnostics (guided and post-hoc plans), and the
+    per-plan lists (`plan_*` columns): P(spill) of the unguided sample from the same noise and of
+    the executed sample, the mean gradient norm and the executed chunk's displacement (mm)."""
     guided = [d for d in diagnostics if d.get("guided_steps", 0) > 0]
     if not guided:
         return {"guided_steps": 0, "p_spill_before": math.nan, "p_spill_after": math.nan,
-                "guidance_grad_norm": math.nan, "guidance_displacement": math.nan}
-    return {
+                "guidance_grad_norm": math.nan, "guidance_displacement": math.nan,
+                "p_spill_unguided": math.nan, "p_spill_guided": math.nan, "guidance_displacement_mm": math.nan}
+    out: dict[str, Any] = {
         "guided_steps": int(sum(d["guided_steps"] for d in guided)),
         "p_spill_before": float(np.mean([d["cost_first"] for d in guided])),
         "p_spill_after": float(np.mean([d["cost_last"] for d in guided])),
         "guidance_grad_norm": float(np.mean([d["grad_norm_mean"] for d in guided])),
         "guidance_displacement": float(np.mean([d["displacement_total"] for d in guided])),
     }
+    compared = [d for d in guided if "p_spill_unguided" in d]
+    if compared:
+        out.update({
+            "p_spill_unguided": float(np.mean([d["p_spill_unguided"] for d in compared])),
+            "p_spill_guided": float(np.mean([d["p_spill_guided"] for d in compared])),
+            "guidance_displacement_mm": float(np.mean([d.get("displacement_mm", math.nan) for d in compared])),
+            "plan_p_spill_unguided": [float(d["p_spill_unguided"]) for d in compared],
+            "plan_p_spill_guided": [float(d["p_spill_guided"]) for d in compared],
+            "plan_grad_norm": [float(d["grad_norm_mean"]) for d in compared],
+            "plan_displacement_mm": [float(d.get("displacement_mm", math.nan)) for d in compared],
+        })
+    else:
+        out.update({"p_spill_unguided": math.nan, "p_spill_guided": math.nan, "guidance_displacement_mm": math.nan})
+    return out
 
 
 def run_transfer(env: Any, scene: EpisodeScene, settings: Any) -> dict[str, Any]:
@@ -275,7 +292,7 @@ def evaluation_episode(spec: Any, context: Any) -> dict[str, Any]:
     import torch
 
     from grits_lab.config import config_from_dict
-    from grits_lab.evaluation.methods import build_controller, guidance_columns
+    from grits_lab.evaluation.methods import METHODS, build_controller, guidance_columns
     from grits_lab.perception.scene import builder_for_env
     from grits_lab.sim import SimConfig
 
@@ -294,6 +311,7 @@ def evaluation_episode(spec: Any, context: Any) -> dict[str, Any]:
     record.update({
         "run_id": p.run_id, "method": p.method, "food": spec.food, "split": p.split, "level": spec.level,
         "trial": p.trial, "seed": spec.seed, "rho": rho, "s": s, "error": "",
+        "guidance_step": config.guidance.step if METHODS[p.method].sampler == "guided" else "",
         "wall_time_s": time.perf_counter() - start,
         **{f"checkpoint_{k}": d for k, d in p.digests.items()},
     })

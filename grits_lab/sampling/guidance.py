@@ -18,6 +18,15 @@ calls the predictor lives in grits_lab/spillage. Two gradients are offered:
 
 With rho = 0, or a threshold s below every visited timestep, no guided branch runs, so the
 result is bit-identical to the unguided sample for the same generator.
+
+What rho means (`GuidanceConfig.step`):
+* "gradient" (the paper, SPEC "rho = 2.5"): the update is rho * grad f. Its size is rho times
+  the predictor's gradient norm, which depends on the predictor (its training, its saturation:
+  the gradient of a probability near 0 or 1 vanishes) and on the action normalizer, so a rho
+  tuned for one predictor means nothing for another.
+* "normalized": the update is rho * grad f / ||grad f|| (per sample, over the horizon): rho is
+  the distance moved per guided step in the policy's normalized action space, the same for every
+  predictor; the predictor only gives the direction.
 """
 
 from __future__ import annotations
@@ -47,10 +56,15 @@ class GuidanceConfig:
     grad_clip: float | None = None  # clamp each gradient entry to [-c, c] (per axis) before scaling
     clip_estimate: bool = False  # clip A_{0|t} to the action range before evaluating f
     diagnostics: bool = True  # also evaluate f after the update (one more objective call per step)
+    step: Literal["gradient", "normalized"] = "gradient"  # rho * grad (paper) or rho * grad / ||grad|| (module docstring)
+    # Also denoise the same initial noise without guidance and evaluate f on both finished
+    # samples (one more unguided denoising pass per plan): what guidance changed, per plan.
+    compare_unguided: bool = False
 
     def __post_init__(self) -> None:
         require(self.rho >= 0, "rho", self.rho, "non-negative")
         require(self.grad_clip is None or self.grad_clip > 0, "grad_clip", self.grad_clip, "positive or null")
+        require(self.step in ("gradient", "normalized"), "step", self.step, "gradient or normalized")
 
 
 @dataclass
@@ -82,10 +96,17 @@ class StepDiagnostics:
 class SampleResult:
     sample: torch.Tensor  # A_0, (B, H, D) in normalized action space
     steps: list[StepDiagnostics] = field(default_factory=list)
+    # With compare_unguided (or post-hoc): the unguided A_0 from the same noise, and f of both samples.
+    unguided: torch.Tensor | None = None
+    cost_unguided: torch.Tensor | None = None  # (B,) f(unguided A_0)
+    cost_final: torch.Tensor | None = None  # (B,) f(A_0)
 
     def summary(self) -> dict[str, Any]:
         """Plain numbers for logs and records: guided step count and mean diagnostics."""
         out: dict[str, Any] = {"guided_steps": len(self.steps)}
+        if self.cost_unguided is not None and self.cost_final is not None:
+            out["p_spill_unguided"] = float(self.cost_unguided.mean())
+            out["p_spill_guided"] = float(self.cost_final.mean())
         if self.steps:
             out["guided_timesteps"] = [s.timestep for s in self.steps]
             out["cost_first"] = float(self.steps[0].cost_before.mean())
@@ -127,6 +148,19 @@ def _clip(grad: torch.Tensor, clip: float | None) -> torch.Tensor:
     return grad if clip is None else grad.clamp(-clip, clip)
 
 
+def _step_direction(grad: torch.Tensor, clip: float | None, step: str) -> torch.Tensor:
+    """The direction rho multiplies: the (clipped) gradient, or its unit vector per sample."""
+    d = _clip(grad, clip)
+    if step == "normalized":
+        d = d / _per_item_norm(d).clamp_min(1e-12).view(-1, *([1] * (d.ndim - 1)))
+    return d
+
+
+def _final_costs(objective: Objective, unguided: torch.Tensor, guided: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    with torch.no_grad():
+        return objective(unguided).detach(), objective(guided).detach()
+
+
 class DDIMSampler:
     """DDIM sampling with optional Algorithm-1 guidance; `guidance=None` is the plain policy."""
 
@@ -156,6 +190,15 @@ class DDIMSampler:
         guided = set(self.guided_timesteps()) if objective is not None else set()
         if g is not None and g.rho > 0 and objective is None and self.guided_timesteps():
             raise ValueError("guided sampling needs an objective")
+        twin = None
+        if guided and g is not None and g.compare_unguided:
+            twin = torch.Generator(device=device)
+            if generator is not None:
+                twin.set_state(generator.get_state())
+            else:
+                twin.seed()
+                generator = torch.Generator(device=device)
+                generator.set_state(twin.get_state())
         x = torch.randn(shape, generator=generator, device=device, dtype=torch.float32)
         batch = torch.ones(shape[0], dtype=torch.long, device=device)
         steps: list[StepDiagnostics] = []
@@ -184,7 +227,7 @@ class DDIMSampler:
                     x0_leaf = x0_est.detach().requires_grad_(True)
                     with torch.enable_grad():
                         cost, grad = _objective_grad(objective, x0_leaf, x0_leaf)  # type: ignore[arg-type]
-                update = g.rho * _clip(grad, g.grad_clip)
+                update = g.rho * _step_direction(grad, g.grad_clip, g.step)
                 x_prev = x_prev - update
                 cost_after = None
                 if g.diagnostics:
@@ -192,7 +235,11 @@ class DDIMSampler:
                         cost_after = objective(x0_est.detach() - update).detach()  # type: ignore[misc]
                 steps.append(StepDiagnostics(t, cost, cost_after, _per_item_norm(grad), _per_item_norm(update)))
             x = x_prev.detach()
-        return SampleResult(x, steps)
+        result = SampleResult(x, steps)
+        if twin is not None:
+            result.unguided = DDIMSampler(sched).sample(denoise, shape, generator=twin, device=device).sample
+            result.cost_unguided, result.cost_final = _final_costs(objective, result.unguided, x)  # type: ignore[arg-type]
+        return result
 
 
 def posthoc_adjust(
@@ -239,4 +286,7 @@ class PostHocSampler:
             if self.posthoc.rho > 0 and self.posthoc.n_steps > 0:
                 raise ValueError("post-hoc adjustment needs an objective")
             return result
-        return posthoc_adjust(result.sample, objective, self.posthoc)
+        adjusted = posthoc_adjust(result.sample, objective, self.posthoc)
+        adjusted.unguided = result.sample
+        adjusted.cost_unguided, adjusted.cost_final = _final_costs(objective, result.sample, adjusted.sample)
+        return adjusted

@@ -18,11 +18,11 @@ from grits_lab.runners import SerialExecutor
 
 # Columns that legitimately differ between two runs of the same episode (clock, method identity).
 VOLATILE = {"method", "rho", "s", "wall_time_s", "scoop_time_s", "transfer_time_s", "plan_time_mean_s", "plan_time_max_s",
-            "checkpoint_predictor", "checkpoint_predictor_raw", "checkpoint_predictor_pointnet2", "run_id"}
+            "checkpoint_predictor", "checkpoint_predictor_raw", "checkpoint_predictor_pointnet2", "run_id", "guidance_step"}
 
 
 def outcome(row: pd.Series) -> dict:
-    return {k: v for k, v in row.items() if k not in VOLATILE and not (isinstance(v, float) and math.isnan(v))}
+    return {k: v for k, v in row.items() if k not in VOLATILE and v is not None and not (isinstance(v, float) and math.isnan(v))}
 
 
 @pytest.fixture(scope="module")
@@ -49,6 +49,14 @@ def test_every_method_gives_a_complete_record(all_methods):
     assert guided.loc["dp", "guided_steps"] == 0
     assert guided.loc["dp_post", "guided_steps"] == 6 * guided.loc["dp_post", "n_plans"]
     assert len(guided.loc["grits", "checkpoint_policy"]) == 16 and len(guided.loc["grits", "checkpoint_predictor"]) == 16
+    # Per plan: P(spill) of the unguided sample from the same noise and of the executed one, the
+    # gradient norm and how far the executed chunk moved; the rho definition used is recorded.
+    for method in ("grits", "dp_post"):
+        row = guided.loc[method]
+        n = row["n_plans"]
+        assert len(row["plan_p_spill_unguided"]) == len(row["plan_p_spill_guided"]) == len(row["plan_displacement_mm"]) == n
+        assert all(0 <= p <= 1 for p in row["plan_p_spill_guided"]) and min(row["plan_displacement_mm"]) >= 0
+    assert guided.loc["grits", "guidance_step"] == "gradient" and guided.loc["dp", "guidance_step"] == ""
 
 
 def test_rho_zero_grits_is_dp_for_the_whole_episode(models, tmp_path, all_methods):

@@ -124,3 +124,33 @@ def test_posthoc_sampler_starts_from_the_unguided_sample():
     sampler = PostHocSampler(DDIMConfig(), PostHocConfig(rho=0.5, n_steps=6))
     moved = sampler.sample(dummy_denoiser, SHAPE, generator=torch.Generator().manual_seed(3), objective=x_coordinate_cost)
     assert (x_coordinate_cost(moved.sample) < x_coordinate_cost(plain)).all()
+
+
+def test_normalized_step_moves_rho_per_guided_step_whatever_the_gradient_scale():
+    # The same cost scaled by 1000 has a 1000x gradient: the paper's step grows with it, the
+    # normalized step does not.
+    for scale in (1.0, 1000.0):
+        cost = lambda traj, k=scale: k * x_coordinate_cost(traj)  # noqa: E731
+        result = _sample(GuidanceConfig(rho=0.2, threshold=100, step="normalized"), objective=cost)
+        assert all(torch.allclose(s.displacement, torch.full((SHAPE[0],), 0.2)) for s in result.steps)
+    paper = [_sample(GuidanceConfig(rho=0.2, threshold=100), objective=lambda t, k=k: k * x_coordinate_cost(t)) for k in (1.0, 10.0)]
+    assert (paper[1].steps[0].displacement > 5 * paper[0].steps[0].displacement).all()
+
+
+def test_compare_unguided_gives_the_plain_sample_from_the_same_noise_and_both_costs():
+    plain = _sample(None, objective=None).sample
+    result = _sample(GuidanceConfig(rho=0.5, threshold=100, compare_unguided=True))
+    assert torch.equal(result.unguided, plain)
+    assert torch.allclose(result.cost_unguided, x_coordinate_cost(plain)) and torch.allclose(result.cost_final, x_coordinate_cost(result.sample))
+    assert (result.cost_final < result.cost_unguided).all()
+    summary = result.summary()
+    assert summary["p_spill_guided"] < summary["p_spill_unguided"]
+    # Without the comparison the guided sample is the same; only the extra pass is skipped.
+    assert torch.equal(_sample(GuidanceConfig(rho=0.5, threshold=100)).sample, result.sample)
+
+
+def test_posthoc_sampler_reports_the_unguided_sample_and_both_costs():
+    sampler = PostHocSampler(DDIMConfig(), PostHocConfig(rho=0.5, n_steps=3))
+    result = sampler.sample(dummy_denoiser, SHAPE, generator=torch.Generator().manual_seed(3), objective=x_coordinate_cost)
+    assert torch.equal(result.unguided, _sample(None, objective=None).sample)
+    assert (result.cost_final < result.cost_unguided).all()
