@@ -113,7 +113,7 @@ def test_foods_json_gives_amount_count_and_settled_fill_height(capsys):
     data = json.loads(out)
     assert code == 0 and [f["food"] for f in data["foods"]] == ["mung_beans", "milk_tea", "mentos"]
     mung = data["foods"][0]
-    assert mung["levels"]["high"]["amount"] == {"fill_height_m": 0.028} and mung["coarse_grain"] > 1
+    assert mung["levels"]["high"]["amount"] == {"fill_height_m": 0.024} and mung["coarse_grain"] > 1
     assert data["foods"][2]["levels"]["high"]["amount"]["pieces"] == data["foods"][2]["levels"]["high"]["n_particles"]
     for food in data["foods"]:
         _check_level_bands(food)
