@@ -3,28 +3,23 @@
 from __future__ import annotations
 
 import json
+import re
 
 import imageio.v2 as imageio
 import pandas as pd
 import pytest
 
-from eval_helpers import eval_config
 from grits_lab.cli import main
 from grits_lab.errors import InputError, StorageError
 from grits_lab.evaluation.replay import replay_episode
-from grits_lab.evaluation.run import evaluate
 from grits_lab.sim.config import CameraConfig
 
 SMALL_CAMERA = CameraConfig(name="video", eye=(1.08, 0.14, 0.6), target=(0.47, 0.12, 0.07), fov_deg=50.0, width=96, height=72)
 
 
 @pytest.fixture(scope="module")
-def run(models, tmp_path_factory):
-    """A recorded run: dp and grits on the same episode."""
-    config = eval_config(models, tmp_path_factory.mktemp("replay-run"), methods=["dp", "grits"])
-    records = evaluate(config, progress=False)
-    assert (records["error"] == "").all()
-    return config.output_dir, records
+def run(recorded_run):
+    return recorded_run
 
 
 def episode(records: pd.DataFrame, method: str) -> dict:
@@ -65,7 +60,7 @@ def test_a_record_that_disagrees_with_its_episode_is_reported_with_the_column(ru
     run_dir, records = run
     tampered = tmp_path / "tampered"
     tampered.mkdir()
-    (tampered / "config.yaml").write_text((run_dir_path(run_dir) / "config.yaml").read_text())
+    (tampered / "config.yaml").write_text((run_dir / "config.yaml").read_text())
     frame = records.copy()
     frame.loc[frame["method"] == "dp", "scooped"] += 1
     frame.to_parquet(tampered / "episodes.parquet")
@@ -78,7 +73,7 @@ def test_a_checkpoint_that_changed_since_the_record_stops_the_replay(run, tmp_pa
     run_dir, records = run
     changed = tmp_path / "changed"
     changed.mkdir()
-    (changed / "config.yaml").write_text((run_dir_path(run_dir) / "config.yaml").read_text())
+    (changed / "config.yaml").write_text((run_dir / "config.yaml").read_text())
     frame = records.copy()
     frame["checkpoint_policy"] = "0" * 16
     frame.to_parquet(changed / "episodes.parquet")
@@ -101,7 +96,27 @@ def test_the_replay_command_prints_one_json_object_and_exits_0_on_a_match(run, c
     assert main(["replay", str(run_dir), "--method", "dp", "--food", e["food"], "--level", e["level"], "--trial", "0", "--video", "x.avi"]) == 2
 
 
-def run_dir_path(run_dir):
-    from pathlib import Path
 
-    return Path(run_dir)
+def test_report_videos_replay_dp_beside_grits_on_the_same_seed(run, tmp_path):
+    from functools import partial
+
+    from grits_lab.report import build_report
+
+    run_dir, records = run
+    out = tmp_path / "report"
+    build_report(run_dir, out, videos=1, replay=partial(replay_episode, camera=SMALL_CAMERA, every=5))
+    html = (out / "report.html").read_text()
+    sources = re.findall(r'<video [^>]*src="([^"]+)"', html)
+    e = episode(records, "dp")
+    assert sources == [f"videos/{e['food']}-{e['level']}-0-dp.mp4", f"videos/{e['food']}-{e['level']}-0-grits.mp4"]
+    assert all((out / s).stat().st_size > 0 for s in sources)
+    assert html.count("replay reproduces the record") == 2
+
+
+def test_report_videos_need_an_evaluation_run_directory(tmp_path, capsys):
+    records = tmp_path / "only-records"
+    records.mkdir()
+    pd.DataFrame([{"method": "dp", "food": "sago", "level": "low", "task_success": True, "spillage": False,
+                   "scoop_failure": False}]).to_parquet(records / "episodes.parquet")
+    assert main(["report", str(records), "--videos", "1"]) == 2
+    assert "lacks config.yaml" in capsys.readouterr().err
