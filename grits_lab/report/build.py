@@ -24,6 +24,7 @@ from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atom
 from grits_lab.report import figures
 from grits_lab.report.loading import RunData, load_run
 from grits_lab.report.provenance import episode_counts, error_messages, report_provenance
+from grits_lab.report.guidance import guidance_figure, guidance_table, guided_episodes
 from grits_lab.report.headline import headline_sentence, headline_table
 from grits_lab.report.render import (
     Collapsed,
@@ -136,6 +137,15 @@ def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Sec
             _figure("fig8_ablation", fig8.title, "Bars: simulation; error bars: Wilson 95%.",
                     figures.method_bars(fig8.data, out / "figures" / "fig8_ablation.png", fig8.title), result),
         ]))
+        guided = guided_episodes(episodes)
+        if not guided.empty:
+            table = guidance_table(guided)
+            sections.append(Section("Guidance: what it changed", [
+                _table(table, out, result),
+                _figure("guidance", table.title, "Left: the predictor's P(spill) of each guided episode's plans before the first and "
+                        "after the last guidance step (lines pair one episode). Right: the guidance displacement per plan.",
+                        guidance_figure(guided, out / "figures" / "guidance.png"), result),
+            ]))
         long = ReportTable("breakdown_long", "Per method x food x level (long form)", "", episodes.head(0), breakdown_long(episodes))
         result.files.append(write_csv(long, out / "csv" / "breakdown_long.csv"))
         heatmap = figures.breakdown_heatmap({t.key.removeprefix("breakdown_"): t.data for t in breakdown},

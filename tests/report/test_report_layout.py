@@ -102,3 +102,25 @@ def test_a_replay_that_cannot_run_is_shown_with_its_reason(tmp_path):
     dp, grits = row.videos
     assert dp.path is None and "checkpoint `policy` changed" in dp.caption
     assert grits.path == "videos/sago-low-0-grits.mp4" and "reproduces" in grits.caption
+
+
+def test_guidance_distributions_per_method_from_the_records(tmp_path):
+    from grits_lab.report.guidance import guided_episodes
+
+    frame = plausible_run(1)
+    guided = frame["method"].isin(["grits", "dp_post"])
+    frame["guided_steps"] = guided.astype(int) * 6
+    frame["p_spill_before"] = frame["trial"].map({0: 0.2, 1: 0.4, 2: 0.6, 3: 0.8, 4: 0.9}).where(guided)
+    frame["p_spill_after"] = (frame["p_spill_before"] - 0.1).where(guided)
+    frame["guidance_displacement"] = 0.5
+    frame.loc[frame["trial"] == 4, "p_spill_after"] = 0.95  # guidance raised it once per (food, level)
+    frame.to_parquet(tmp_path / "episodes.parquet", index=False)
+    result = build_report(tmp_path)
+    table = next(t for t in result.tables if t.key == "guidance")
+    assert list(table.data["variant"]) == ["dp_post", "grits"]  # dp and the rest have no guided steps
+    grits = table.data.set_index("variant").loc["grits"]
+    errors = int(normalize_records(frame).query("method == 'grits'")["is_error"].sum())
+    assert grits["episodes"] == 100 - errors and grits["p_spill_before_median"] == pytest.approx(0.6)
+    assert grits["lowered"] == len(guided_episodes(normalize_records(frame)).query("method == 'grits' and trial != 4"))
+    assert (result.out_dir / "figures" / "guidance.png").stat().st_size > 0
+    assert "Guidance: what it changed" in (result.out_dir / "report.html").read_text()
