@@ -1,4 +1,5 @@
-"""`grits-lab evaluate CONFIG`: every configured method on foods x levels x trials, records to Parquet, resumable."""
+"""`grits-lab evaluate CONFIG` (every configured method on foods x levels x trials, records to Parquet, resumable)
+and `grits-lab replay RUN_DIR` (one recorded episode again, checked against its record, with a video)."""
 
 from __future__ import annotations
 
@@ -26,6 +27,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.set_defaults(handler=_run)
 
+    replay = subparsers.add_parser(
+        "replay",
+        help="re-run one recorded evaluation episode, check it reproduces its record, optionally film it",
+        description=(
+            "Re-run the episode (method, food, level, trial) of an evaluation run directory from its record: "
+            "the same seed, the run's config.yaml, the recorded guidance (rho, s) and the checkpoints, "
+            "checked by digest. Compares every recorded metric with the replay (exit code 0: equal, 1: "
+            "diverged) and, with --video, writes a captioned video from a camera that shows the spoon and both bowls."
+        ),
+    )
+    replay.add_argument("run_dir", help="run directory of `grits-lab evaluate` (episodes.parquet, config.yaml)")
+    replay.add_argument("--method", required=True, help="method name as recorded, e.g. dp or grits")
+    replay.add_argument("--food", required=True)
+    replay.add_argument("--level", required=True, help="quantity level, e.g. low")
+    replay.add_argument("--trial", type=int, required=True, help="trial index within (food, level), 0-based")
+    replay.add_argument("--video", default=None, help="write a captioned video: FILE.mp4 (H.264) or FILE.gif")
+    replay.add_argument("--every", type=int, default=1, help="render every k-th action (default 1: every 0.1 s)")
+    replay.add_argument("--json", action="store_true", help="print exactly one JSON object")
+    replay.set_defaults(handler=_replay)
+
 
 def _run(args: argparse.Namespace) -> int:
     from grits_lab.config import load_yaml
@@ -50,3 +71,25 @@ def _run(args: argparse.Namespace) -> int:
     print(summary_table(records))
     print(f"records: {config.output_dir}/episodes.parquet ({len(records)} episodes); tables and figures: grits-lab report {config.output_dir}")
     return 0
+
+
+def _replay(args: argparse.Namespace) -> int:
+    import json
+
+    from grits_lab.errors import InputError
+    from grits_lab.evaluation.replay import replay_episode
+    from grits_lab.sim.video import check_video_path
+
+    if args.video is not None:
+        check_video_path(args.video)  # before the simulator starts
+    if args.every < 1:
+        raise InputError(f"--every must be at least 1. Got {args.every}.")
+    result = replay_episode(args.run_dir, method=args.method, food=args.food, level=args.level, trial=args.trial,
+                            video=args.video, every=args.every)
+    if args.json:
+        print(json.dumps(result.to_dict()))
+    else:
+        print(result.describe())
+        if result.video:
+            print(f"video: {result.video} ({result.frames} frames)")
+    return 0 if result.matches else 1

@@ -8,18 +8,26 @@ Output layout (OUT defaults to RUN_DIR/report):
     csv/<table>.csv   the numbers behind every table (rates, Wilson bounds, counts)
     figures/*.png     bar charts with Wilson 95% error bars, per-food stacks, heatmaps, sweep front
     provenance.json   what produced the records and the report
+    videos/*.mp4      with `videos=N`: replayed episodes, shown side by side in report.html
+
+The page opens with the headline comparison (Diffusion Policy vs GRITS, with counts); lists of
+missing cells are collapsed under it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Callable
 
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
 from grits_lab.report import figures
 from grits_lab.report.loading import RunData, load_run
 from grits_lab.report.provenance import episode_counts, error_messages, report_provenance
+from grits_lab.report.guidance import guidance_figure, guidance_table, guided_episodes
+from grits_lab.report.headline import headline_sentence, headline_table
 from grits_lab.report.render import (
+    Collapsed,
     Preformatted,
     ReportFigure,
     Section,
@@ -56,21 +64,36 @@ def default_out_dir(run_dir: str | Path) -> Path:
     return (run_dir if run_dir.is_dir() else run_dir.parent) / "report"
 
 
-def build_report(run_dir: str | Path, out_dir: str | Path | None = None) -> ReportResult:
+def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, videos: int = 0,
+                 replay: Callable[..., Any] | None = None) -> ReportResult:
+    """Write the report of RUN_DIR into `out_dir` (default RUN_DIR/report).
+
+    videos: replay up to this many episodes per food (grits_lab/report/videos.py has the rule)
+    under Diffusion Policy and GRITS and show them side by side; `replay` is the function that
+    replays one recorded episode into a video (`grits_lab.evaluation.replay.replay_episode`).
+    With videos = 0 (the default) nothing is replayed and no simulator is needed.
+    """
     out = Path(out_dir) if out_dir is not None else default_out_dir(run_dir)
     run = load_run(run_dir, exclude=out)
     ensure_writable_dir(out)
     result = ReportResult(out)
     sections = _results_sections(run, out, result) + [_provenance_section(run, out, result)]
+    if videos > 0 and run.episodes is not None:
+        if replay is None:
+            raise ValueError("videos > 0 needs a replay function")
+        sections.insert(0, _videos_section(run, out, videos, replay, result))
     missing = list(dict.fromkeys(note for table in result.tables for note in table.notes if note.startswith("Missing")))
     result.missing = missing
     overview = Section("Overview", [
         f"Simulated results of run {run.run_dir}, beside the paper's real-robot numbers where the paper states "
         f"them. Labels: '{SIM_LABEL}' for this run, '{PAPER_LABEL}' for the paper. Rates carry Wilson 95% "
         "intervals and episode counts; a method or food without records is shown as — and listed below, never as zero.",
-        *(missing or ["Missing data: none."]),
+        Collapsed(f"Missing data: {len(missing)} notes (click to list)", missing) if missing else "Missing data: none.",
     ])
     sections.insert(0, overview)
+    if run.episodes is not None and not is_sweep_records(run):
+        headline = headline_table(run.episodes)
+        sections.insert(0, Section("Headline: Diffusion Policy vs GRITS", [headline_sentence(headline), _table(headline, out, result)]))
     title = f"GRITS reproduction report: {run.run_dir.resolve().name}"
     result.files.append(_write(out / "report.md", render_markdown(title, sections, out)))
     result.files.append(_write(out / "report.html", render_html(title, sections)))
@@ -114,6 +137,15 @@ def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Sec
             _figure("fig8_ablation", fig8.title, "Bars: simulation; error bars: Wilson 95%.",
                     figures.method_bars(fig8.data, out / "figures" / "fig8_ablation.png", fig8.title), result),
         ]))
+        guided = guided_episodes(episodes)
+        if not guided.empty:
+            table = guidance_table(guided)
+            sections.append(Section("Guidance: what it changed", [
+                _table(table, out, result),
+                _figure("guidance", table.title, "Left: the predictor's P(spill) of each guided episode's plans before the first and "
+                        "after the last guidance step (lines pair one episode). Right: the guidance displacement per plan.",
+                        guidance_figure(guided, out / "figures" / "guidance.png"), result),
+            ]))
         long = ReportTable("breakdown_long", "Per method x food x level (long form)", "", episodes.head(0), breakdown_long(episodes))
         result.files.append(write_csv(long, out / "csv" / "breakdown_long.csv"))
         heatmap = figures.breakdown_heatmap({t.key.removeprefix("breakdown_"): t.data for t in breakdown},
@@ -135,6 +167,19 @@ def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Sec
             items.append(_figure("sweep_front", "Sweep: objectives of completed trials", "Red: Pareto front; star: the paper's defaults.", front, result))
         sections.append(Section(f"Sweep summary ({run.trials_file})", items))
     return sections
+
+
+def _videos_section(run: RunData, out: Path, per_food: int, replay: Callable[..., Any], result: ReportResult) -> Section:
+    from grits_lab.report.videos import choose_episodes, film_picks
+
+    picks = choose_episodes(run.episodes, per_food)
+    rows = film_picks(run.run_dir, picks, replay, out)
+    result.files += [out / v.path for row in rows for v in row.videos if v.path]
+    intro = (f"Replayed from their records (same seed, checkpoints and guidance), up to {per_food} per food, chosen in this "
+             "order: Diffusion Policy spilled and GRITS did not; both spilled; GRITS spilled and DP did not; neither "
+             "spilled (ties: lowest level, then trial). Each caption says whether the replay reproduced the record. "
+             "The videos are files in videos/ beside this page.")
+    return Section("Episodes to watch", [intro, *rows] if rows else [intro, "No episode of Diffusion Policy or GRITS to replay."])
 
 
 def is_sweep_records(run: RunData) -> bool:

@@ -1,4 +1,4 @@
-"""`grits-lab report RUN_DIR [--out DIR]`: the paper's tables and figures from a run's records."""
+"""`grits-lab report RUN_DIR [--out DIR] [--videos N]`: the paper's tables and figures from a run's records, optionally with replayed episodes."""
 
 from __future__ import annotations
 
@@ -17,13 +17,30 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("run_dir", metavar="RUN_DIR", help="evaluation or sweep run directory (or one .parquet file of records)")
     parser.add_argument("--out", metavar="DIR", default=None, help="output directory (default: RUN_DIR/report)")
+    parser.add_argument("--videos", metavar="N", type=int, default=0,
+                        help="replay up to N episodes per food under Diffusion Policy and GRITS (same seed) and show the videos "
+                             "side by side (needs the run's checkpoints; RUN_DIR must be a `grits-lab evaluate` run directory)")
     parser.set_defaults(handler=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from grits_lab.errors import InputError
     from grits_lab.report.build import build_report
 
-    result = build_report(args.run_dir, args.out)
+    replay = None
+    if args.videos < 0:
+        raise InputError(f"--videos must be 0 or more. Got {args.videos}.")
+    if args.videos:
+        from grits_lab.evaluation.replay import replay_episode
+
+        run_dir = Path(args.run_dir)
+        missing = [name for name in ("episodes.parquet", "config.yaml") if not (run_dir / name).is_file()]
+        if missing:
+            raise InputError(f"--videos replays episodes from a `grits-lab evaluate` run directory; {run_dir} lacks {', '.join(missing)}")
+        replay = replay_episode
+    result = build_report(args.run_dir, args.out, videos=args.videos, replay=replay)
     print(f"report written to {result.out_dir} ({len(result.files)} files): {result.out_dir / 'report.html'}")
     for note in result.missing:
         print(f"  {note}")

@@ -3,7 +3,9 @@
 The report model is a list of Sections holding tables, figures and preformatted text; each
 writer walks the same model, so the formats cannot disagree about what the report contains.
 The HTML page embeds its figures as base64 data URIs and its style inline: it opens offline,
-can be mailed as one file, and references nothing outside itself.
+can be mailed as one file, and references nothing outside itself, except the videos of
+`grits-lab report --videos`, which sit beside it in `videos/` (the folder travels as one).
+Wide tables scroll inside their own box; lists of missing cells are collapsed.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import pandas as pd
 
 from grits_lab.io import write_text_atomic
 from grits_lab.report.tables import ReportTable
+from grits_lab.report.videos import VideoRow
 from grits_lab.report.vocabulary import MISSING
 
 
@@ -38,9 +41,21 @@ class Preformatted:
 
 
 @dataclass
+class Collapsed:
+    """Lines a reader opens when needed (e.g. the list of missing cells), under a one-line summary."""
+
+    summary: str
+    lines: list[str]
+
+
+@dataclass
 class Section:
     title: str
-    items: list[Union[ReportTable, ReportFigure, Preformatted, str]] = field(default_factory=list)
+    items: list[Union[ReportTable, ReportFigure, Preformatted, Collapsed, VideoRow, str]] = field(default_factory=list)
+
+
+def is_missing_note(note: str) -> bool:
+    return note.startswith("Missing")
 
 
 def write_csv(table: ReportTable, path: Path) -> Path:
@@ -78,6 +93,11 @@ def render_markdown(title: str, sections: list[Section], out_dir: Path) -> str:
                 lines += [f"![{item.title}]({rel})", "", f"*{item.title}.* {item.caption}", ""]
             elif isinstance(item, Preformatted):
                 lines += [f"**{item.title}**", "", f"```{item.language}", item.text.rstrip(), "```", ""]
+            elif isinstance(item, Collapsed):
+                lines += [f"**{item.summary}**", ""] + [f"- {line}" for line in item.lines] + [""]
+            elif isinstance(item, VideoRow):
+                lines += [f"**{item.title}**", ""]
+                lines += [f"- [{v.path}]({v.path}): {v.caption}" if v.path else f"- {v.caption}" for v in item.videos] + [""]
             else:
                 lines += [item, ""]
     return "\n".join(lines).rstrip() + "\n"
@@ -98,9 +118,14 @@ def render_html(title: str, sections: list[Section]) -> str:
             if isinstance(item, ReportTable):
                 parts.append(f"<h3>{html.escape(item.title)}</h3><p class=caption>{html.escape(item.caption)}</p>")
                 frame = item.display if not item.display.empty else pd.DataFrame({"": [MISSING]})
-                parts.append(frame.to_html(index=False, escape=True, border=0, na_rep=MISSING, classes="data"))
-                if item.notes:
-                    parts.append("<ul class=notes>" + "".join(f"<li>{html.escape(n)}</li>" for n in item.notes) + "</ul>")
+                table = frame.to_html(index=False, escape=True, border=0, na_rep=MISSING, classes="data")
+                parts.append(f'<div class="scroll">{table}</div>')
+                notes = [n for n in item.notes if not is_missing_note(n)]
+                missing = [n for n in item.notes if is_missing_note(n)]
+                if notes:
+                    parts.append("<ul class=notes>" + "".join(f"<li>{html.escape(n)}</li>" for n in notes) + "</ul>")
+                if missing:
+                    parts.append(_details(f"Missing data in this table ({len(missing)} notes)", missing))
             elif isinstance(item, ReportFigure):
                 encoded = base64.b64encode(item.path.read_bytes()).decode("ascii")
                 parts.append(
@@ -109,11 +134,25 @@ def render_html(title: str, sections: list[Section]) -> str:
                 )
             elif isinstance(item, Preformatted):
                 parts.append(f"<details><summary>{html.escape(item.title)}</summary><pre>{html.escape(item.text)}</pre></details>")
+            elif isinstance(item, Collapsed):
+                parts.append(_details(item.summary, item.lines))
+            elif isinstance(item, VideoRow):
+                parts.append(f'<h3>{html.escape(item.title)}</h3><div class="videos">')
+                for video in item.videos:
+                    player = (f'<video controls muted loop playsinline preload="metadata" src="{html.escape(video.path)}"></video>'
+                              if video.path else '<div class="novideo">not replayed</div>')
+                    parts.append(f"<figure>{player}<figcaption>{html.escape(video.caption)}</figcaption></figure>")
+                parts.append("</div>")
             else:
                 parts.append(f"<p>{html.escape(item)}</p>")
         parts.append("</section>")
     parts.append("</body></html>")
     return "\n".join(parts) + "\n"
+
+
+def _details(summary: str, lines: list[str]) -> str:
+    body = "".join(f"<li>{html.escape(line)}</li>" for line in lines)
+    return f"<details class=missing><summary>{html.escape(summary)}</summary><ul class=notes>{body}</ul></details>"
 
 
 def to_json_text(value: object) -> str:
@@ -136,10 +175,15 @@ def _latex_escape(text: str) -> str:
 _CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}
 h1{font-size:1.6em}h2{border-bottom:2px solid #ddd;padding-bottom:.2em;margin-top:2em}h3{margin-bottom:.2em}
-table.data{border-collapse:collapse;font-size:.82em;margin:.5em 0;display:block;overflow-x:auto}
+div.scroll{max-width:100%;overflow-x:auto;margin:.5em 0}
+table.data{border-collapse:collapse;font-size:.82em}
 table.data th,table.data td{border-bottom:1px solid #e3e3e3;padding:.25em .6em;text-align:left;white-space:nowrap}
 table.data thead th{border-bottom:2px solid #999;background:#f6f6f6}
 p.caption{color:#555;font-size:.9em;margin-top:0}ul.notes{color:#555;font-size:.85em}
 figure{margin:1em 0}figure img{max-width:100%;border:1px solid #eee}figcaption{font-size:.85em;color:#555}
 pre{background:#f6f6f6;padding:.8em;overflow-x:auto;font-size:.8em}nav ol{columns:2;font-size:.9em}
+details.missing summary{cursor:pointer;color:#555;font-size:.9em}
+div.videos{display:flex;flex-wrap:wrap;gap:1em}div.videos figure{margin:0;flex:1 1 420px;max-width:560px}
+div.videos video{width:100%;border:1px solid #ddd;background:#000}
+div.novideo{padding:3em 1em;background:#f3f3f3;color:#777;text-align:center}
 """

@@ -100,34 +100,9 @@ def _rollout(args: argparse.Namespace) -> int:
 
 
 def _write_video(path: Path, frames: list[Any]) -> None:
-    import numpy as np
+    from grits_lab.sim.video import write_video
 
-    from grits_lab.io import atomic_path
-
-    if not frames:
-        raise InputError("no frames were rendered")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    suffix = path.suffix.lower()
-    with atomic_path(path) as tmp:
-        if suffix == ".png":
-            from PIL import Image
-
-            cols = 4
-            blank = np.zeros_like(frames[0])
-            padded = frames + [blank] * (-len(frames) % cols)
-            strip = np.concatenate([np.concatenate(padded[i:i + cols], axis=1) for i in range(0, len(padded), cols)], axis=0)
-            Image.fromarray(strip).save(tmp, format="PNG")
-        elif suffix == ".gif":
-            import imageio.v2 as imageio
-
-            imageio.mimsave(tmp, frames, format="GIF", duration=0.1, loop=0)
-        else:
-            import imageio.v2 as imageio
-
-            try:
-                imageio.mimsave(tmp, frames, format="FFMPEG", fps=10)
-            except (ImportError, ValueError, RuntimeError) as exc:
-                raise InputError(f"cannot write MP4 ({exc}); install imageio-ffmpeg or use .gif / .png") from None
+    write_video(path, frames, fps=10.0)
 
 
 def _scene(args: argparse.Namespace) -> int:

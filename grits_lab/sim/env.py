@@ -118,6 +118,7 @@ class ScoopEnv:
         self.spoon_geometry = SpoonGeometry()
         self._hand_in_spoon = spoon_in_hand(self.spoon_geometry)
         self._home_joints: np.ndarray | None = None
+        self._seed_stream: np.random.Generator | None = None
 
     # ---- Gymnasium contract ------------------------------------------------------------------
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
@@ -126,13 +127,19 @@ class ScoopEnv:
         options: `food` (name, default mung_beans), `level` (default the food's first level),
         `food_spec` (a FoodSpec used instead of the library, e.g. `foods.primitive_food`),
         `n_particles` (overrides the level's count), `target_xy` (target bowl centre).
+        `seed=None` continues the env's own seed stream (seeded by the last explicit seed; OS
+        entropy only before the first one), as Gymnasium's contract asks.
         """
         options = dict(options or {})
         unknown = set(options) - {"food", "level", "food_spec", "n_particles", "target_xy"}
         if unknown:
             raise InputError(f"unknown reset option {sorted(unknown)[0]!r}; valid: food, level, food_spec, n_particles, target_xy")
         if seed is None:
-            seed = int(np.random.SeedSequence().entropy % (2**31))
+            if self._seed_stream is None:
+                self._seed_stream = np.random.default_rng()
+            seed = int(self._seed_stream.integers(2**31))
+        else:
+            self._seed_stream = make_rng(derive_seed(int(seed), "next_episode"))
         self.seed = int(seed)
         rng = make_rng(self.seed)
         spec: FoodSpec | None = options.get("food_spec")

@@ -103,3 +103,15 @@ def models(tmp_path_factory) -> dict[str, str]:
     train_predictor(pred_cfg, progress=False)
     return {"policy": str(root / "dp" / "checkpoints" / "last.pt"), "bc": str(root / "bc" / "checkpoints" / "last.pt"),
             "predictor": str(root / "predictor" / "tiny" / "best.pt"), "demos": str(demos)}
+
+
+@pytest.fixture(scope="session")
+def recorded_run(models, tmp_path_factory):
+    """A recorded `grits-lab evaluate` run directory: dp and grits on one episode; (run_dir, records)."""
+    from eval_helpers import eval_config
+    from grits_lab.evaluation.run import evaluate
+
+    config = eval_config(models, tmp_path_factory.mktemp("recorded-run"), methods=["dp", "grits"])
+    records = evaluate(config, progress=False)
+    assert (records["error"] == "").all()
+    return Path(config.output_dir), records

@@ -1,0 +1,236 @@
+"""Replaying one recorded evaluation episode: the same seed, checkpoints (checked by digest) and guidance, with a video.
+
+An evaluation record holds everything that decides its episode: the seed, the method, the food
+and level, the guidance setting (rho, s) and the digests of the checkpoints; the run directory's
+`config.yaml` holds the rest. `replay_episode` re-runs the very episode in this process with the
+same code path as `grits-lab evaluate` (grits_lab/evaluation/episode.py), compares every recorded
+metric with the replayed one (exact equality; clocks excluded) and, when asked, renders a frame
+from the video camera after the reset and after every action, captioned with method, food,
+level, step and the spilled count. Rendering reads the simulator and never changes it, so the
+replay with a video is the same episode as the one without.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from grits_lab.errors import InputError, StorageError
+
+# Record columns that measure time or name the run: they differ between a run and its replay.
+NOT_COMPARED = frozenset({"wall_time_s", "scoop_time_s", "transfer_time_s", "plan_time_mean_s", "plan_time_max_s"})
+
+
+@dataclass
+class ReplayResult:
+    """What a replay found. `mismatches`: column -> (recorded, replayed) for every metric that differs."""
+
+    method: str
+    food: str
+    level: str
+    trial: int
+    seed: int
+    rho: float
+    s: int
+    compared: list[str]
+    mismatches: dict[str, tuple[Any, Any]] = field(default_factory=dict)
+    video: str | None = None
+    frames: int = 0
+    replayed: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def matches(self) -> bool:
+        return not self.mismatches
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "method": self.method, "food": self.food, "level": self.level, "trial": self.trial, "seed": self.seed,
+            "rho": None if math.isnan(self.rho) else self.rho, "s": self.s, "matches": self.matches,
+            "compared": self.compared, "mismatches": {k: [_plain(a), _plain(b)] for k, (a, b) in self.mismatches.items()},
+            "video": self.video, "frames": self.frames,
+        }
+
+    def describe(self) -> str:
+        """One line: the replay reproduced the record, or which metrics diverged and from which step."""
+        head = f"{self.method} {self.food}/{self.level} trial {self.trial} (seed {self.seed})"
+        if self.matches:
+            return f"{head}: replay reproduces the record ({len(self.compared)} metrics equal)"
+        diffs = ", ".join(f"{k} {_plain(a)} -> {_plain(b)}" for k, (a, b) in self.mismatches.items())
+        return f"{head}: replay DIVERGED from the record{self.divergence_step()}: {diffs}"
+
+    def divergence_step(self) -> str:
+        steps = []
+        for key in ("first_spill_step", "completion_step", "scoop_steps"):
+            if key in self.mismatches:
+                a, b = self.mismatches[key]
+                steps += [int(v) for v in (a, b) if v is not None and not _is_nan(v) and int(v) >= 0]
+        return f" (by action {min(steps)})" if steps else ""
+
+
+def _is_nan(value: Any) -> bool:
+    return isinstance(value, float) and math.isnan(value)
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        value = value.item()
+    return None if _is_nan(value) else value
+
+
+def _equal(recorded: Any, replayed: Any) -> bool:
+    recorded, replayed = _plain(recorded), _plain(replayed)
+    if recorded is None or replayed is None:
+        return recorded is None and replayed is None
+    if isinstance(recorded, (bool, np.bool_)) or isinstance(replayed, (bool, np.bool_)):
+        return bool(recorded) == bool(replayed)
+    return recorded == replayed
+
+
+def load_record(run_dir: str | Path, *, method: str, food: str, level: str, trial: int) -> dict[str, Any]:
+    """The one record of (method, food, level, trial) in RUN_DIR/episodes.parquet; InputError if none or several."""
+    from grits_lab.evaluation.run import RECORDS_FILE
+
+    path = Path(run_dir) / RECORDS_FILE
+    if not path.is_file():
+        raise InputError(f"no {RECORDS_FILE} in {run_dir}: replay reads the run directory of `grits-lab evaluate`")
+    frame = pd.read_parquet(path)
+    rows = frame[(frame["method"] == method) & (frame["food"] == food) & (frame["level"].astype(str) == str(level))
+                 & (frame["trial"].astype(int) == int(trial))]
+    if rows.empty:
+        have = sorted({(r.method, r.food, str(r.level)) for r in frame.itertuples()})
+        listing = "; ".join(f"{m} {f}/{lv}" for m, f, lv in have[:12])
+        raise InputError(f"{path}: no record of method {method!r}, food {food!r}, level {level!r}, trial {trial} "
+                         f"(trials 0-{int(frame['trial'].max()) if len(frame) else -1}; records: {listing})")
+    if len(rows) > 1:
+        settings = ", ".join(f"rho={r.rho} s={r.s}" for r in rows.itertuples())
+        raise InputError(f"{path}: {len(rows)} records of {method} {food}/{level} trial {trial} ({settings}); "
+                         "replay runs from a run directory with one guidance setting per method")
+    return rows.iloc[0].to_dict()
+
+
+def load_run_config(run_dir: str | Path, record: dict[str, Any]) -> Any:
+    """RUN_DIR/config.yaml as an EvaluationConfig, with the record's guidance setting (rho, s) put in."""
+    from grits_lab.config import config_from_dict, load_yaml
+    from grits_lab.errors import ConfigError
+    from grits_lab.evaluation.config import EvaluationConfig
+    from grits_lab.evaluation.methods import METHODS
+
+    path = Path(run_dir) / "config.yaml"
+    if not path.is_file():
+        raise InputError(f"no config.yaml in {run_dir}: replay needs the resolved config `grits-lab evaluate` writes there")
+    data = dict(load_yaml(path))
+    sampler = METHODS[record["method"]].sampler if record["method"] in METHODS else None
+    rho, s = record.get("rho"), record.get("s")
+    if sampler == "guided" and not _is_nan(rho):
+        data["guidance"] = {**data.get("guidance", {}), "rho": float(rho), "s": int(s)}
+    elif sampler == "posthoc" and not _is_nan(rho):
+        data["posthoc"] = {**data.get("posthoc", {}), "rho": float(rho)}
+    try:
+        return config_from_dict(EvaluationConfig, data)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+
+
+def checked_checkpoints(method: str, config: Any, record: dict[str, Any]) -> dict[str, str]:
+    """{key: path} of the method's checkpoints, each checked against the record's digest (StorageError on a mismatch)."""
+    from grits_lab.evaluation.methods import file_digest, method_checkpoints
+
+    paths = method_checkpoints(method, config.checkpoints)
+    for key, path in paths.items():
+        recorded = record.get(f"checkpoint_{key}")
+        if recorded is None or _is_nan(recorded):
+            continue  # a record written before digests were stored: nothing to check against
+        actual = file_digest(path)
+        if actual != recorded:
+            raise StorageError(f"checkpoint `{key}` at {path} has digest {actual}, but the episode was recorded with {recorded}: "
+                               "it was retrained or replaced since; put the recorded file back to replay")
+    return paths
+
+
+class _FilmedEnv:
+    """A ScoopEnv seen through a camera: renders a captioned frame after the reset and after every action."""
+
+    def __init__(self, env: Any, title: str, camera: Any, every: int) -> None:
+        self._env = env
+        self._title = title
+        self._camera = camera
+        self._every = max(1, int(every))
+        self.frames: list[np.ndarray] = []
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._env, name)
+
+    def _film(self, info: dict[str, Any]) -> None:
+        from grits_lab.sim.video import caption, render_frame
+
+        step = int(info.get("step", 0))
+        if step % self._every:
+            return
+        frame = render_frame(self._env, self._camera)
+        self.frames.append(caption(frame, [self._title, f"step {step:>3}   spilled {int(info.get('spilled', 0))}"]))
+
+    def reset(self, *args: Any, **kwargs: Any) -> Any:
+        obs, info = self._env.reset(*args, **kwargs)
+        self._film(info)
+        return obs, info
+
+    def step(self, action: Any) -> Any:
+        out = self._env.step(action)
+        self._film(out[4])
+        return out
+
+
+def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, trial: int, video: str | Path | None = None,
+                   camera: Any = None, every: int = 1) -> ReplayResult:
+    """Re-run one recorded evaluation episode and compare its metrics with the record.
+
+    video: `.mp4` or `.gif` path for a captioned video (None: no rendering at all); camera: a
+    `CameraConfig` (default `grits_lab.sim.video.VIDEO_CAMERA`, 480 x 360); every: render every
+    k-th action. Raises InputError (no such record, no config), StorageError (a checkpoint whose
+    digest differs from the record's) or ConfigError (a config that no longer loads).
+    """
+    import torch
+
+    from grits_lab.config import config_from_dict
+    from grits_lab.evaluation.episode import run_episode
+    from grits_lab.evaluation.methods import build_controller
+    from grits_lab.perception.scene import builder_for_env
+    from grits_lab.sim import SimConfig
+    from grits_lab.sim.env import ScoopEnv
+    from grits_lab.sim.video import VIDEO_CAMERA, check_video_path, write_video
+
+    if video is not None:
+        video = check_video_path(video)
+    record = load_record(run_dir, method=method, food=food, level=level, trial=trial)
+    config = load_run_config(run_dir, record)
+    paths = checked_checkpoints(method, config, record)
+    torch.set_num_threads(config.num_threads)
+    sim_config = config_from_dict(SimConfig, config.sim, "sim")
+    env = ScoopEnv(sim_config)
+    cache: dict[Any, Any] = {}
+    rho, s = record.get("rho"), int(record.get("s", -1))
+    rho = math.nan if rho is None else float(rho)
+    try:
+        builder = builder_for_env(config.cloud, env)
+        controller = build_controller(method, config, paths, lambda key, factory: cache[key] if key in cache else cache.setdefault(key, factory()))
+        seed = int(record["seed"])
+        played: Any = env
+        if video is not None:
+            setting = "" if math.isnan(rho) else f"   rho {rho:g}" + (f" s {s}" if s >= 0 else "")
+            title = f"{method}   {food} / {level}   trial {trial}   seed {seed}{setting}"
+            played = _FilmedEnv(env, title, camera or VIDEO_CAMERA, every)
+        replayed = run_episode(played, controller, config, seed=seed, food=food, level=level, builder=builder)
+    finally:
+        env.close()
+    compared = sorted(k for k in replayed if k in record and k not in NOT_COMPARED)
+    mismatches = {k: (record[k], replayed[k]) for k in compared if not _equal(record[k], replayed[k])}
+    result = ReplayResult(method, food, str(level), int(trial), int(record["seed"]), rho, s, compared, mismatches, replayed=replayed)
+    if video is not None:
+        result.video = str(write_video(video, played.frames, fps=sim_config.control_hz / played._every))
+        result.frames = len(played.frames)
+    return result

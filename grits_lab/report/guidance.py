@@ -1,0 +1,87 @@
+"""What guidance did, per method: distributions of P(spill) before and after guidance and of the guidance displacement.
+
+Read from the per-episode guidance columns of the evaluation records (grits_lab/evaluation/episode.py,
+`summarize_guidance`): `p_spill_before` (the predictor's P(spill) of the plan's first guided
+estimate, mean over the episode's plans), `p_spill_after` (after the last guided update) and
+`guidance_displacement` (norm of the summed guidance updates of a plan, in normalized action
+units over the whole (horizon x 9) plan, mean over the episode's plans). Only episodes with at
+least one guided step are drawn; methods without guidance have none.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from grits_lab.report.tables import ReportTable
+from grits_lab.report.vocabulary import MAIN_METHODS, ordered
+
+GUIDANCE_COLUMNS = ("p_spill_before", "p_spill_after", "guidance_displacement")
+
+
+def guided_episodes(episodes: pd.DataFrame | None) -> pd.DataFrame:
+    """Rows with guidance diagnostics (guided_steps > 0 and finite P(spill)); empty when the records have none."""
+    if episodes is None or any(c not in episodes.columns for c in (*GUIDANCE_COLUMNS, "guided_steps")):
+        return pd.DataFrame()
+    steps = pd.to_numeric(episodes["guided_steps"], errors="coerce").fillna(0)
+    rows = episodes[(steps > 0) & ~episodes["is_error"]].copy()
+    for column in GUIDANCE_COLUMNS:
+        rows[column] = pd.to_numeric(rows[column], errors="coerce")
+    return rows[np.isfinite(rows["p_spill_before"]) & np.isfinite(rows["p_spill_after"])]
+
+
+def guidance_table(rows: pd.DataFrame) -> ReportTable:
+    """Per method variant: guided episodes, median [quartiles] of P(spill) before, after, and the displacement."""
+    shown, data = [], []
+    for variant in ordered(rows["variant"].unique(), MAIN_METHODS):
+        part = rows[rows["variant"] == variant]
+        name = str(part["variant_name"].iloc[0])
+        entry = {"Method": name, "Guided episodes": str(len(part))}
+        numbers = {"variant": variant, "method_name": name, "episodes": len(part)}
+        for column, label in zip(GUIDANCE_COLUMNS, ("P(spill) before guidance", "P(spill) after guidance", "Displacement per plan")):
+            q1, median, q3 = np.quantile(part[column].dropna(), [0.25, 0.5, 0.75]) if part[column].notna().any() else (np.nan,) * 3
+            entry[label] = f"{median:.3f} [{q1:.3f}, {q3:.3f}]"
+            numbers.update({f"{column}_median": median, f"{column}_q1": q1, f"{column}_q3": q3})
+        lowered = int((part["p_spill_after"] < part["p_spill_before"]).sum())
+        entry["Lowered P(spill)"] = f"{lowered}/{len(part)}"
+        numbers["lowered"] = lowered
+        shown.append(entry)
+        data.append(numbers)
+    return ReportTable("guidance", "Guidance: P(spill) before and after, displacement",
+                       "Per guided episode, the mean over its plans; cells: median [quartiles]. Displacement: norm of a plan's "
+                       "summed guidance updates over its whole horizon x 9 plan, in normalized action units.",
+                       pd.DataFrame(shown), pd.DataFrame(data))
+
+
+def guidance_figure(rows: pd.DataFrame, path: Path) -> Path:
+    """Two panels: P(spill) before vs after per method (box + points, paired lines), and the displacement per method."""
+    from grits_lab.report.figures import _save, method_color, plt
+
+    variants = ordered(rows["variant"].unique(), MAIN_METHODS)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4), gridspec_kw={"width_ratios": [2, 1]})
+    rng = np.random.default_rng(0)  # jitter only
+    for i, variant in enumerate(variants):
+        part = rows[rows["variant"] == variant]
+        color = method_color(str(part["method"].iloc[0]), i)
+        x0, x1 = 3 * i, 3 * i + 1
+        left.boxplot([part["p_spill_before"], part["p_spill_after"]], positions=[x0, x1], widths=0.6, showfliers=False)
+        jitter = rng.uniform(-0.12, 0.12, len(part))
+        for before, after, j in zip(part["p_spill_before"], part["p_spill_after"], jitter):
+            left.plot([x0 + j, x1 + j], [before, after], color=color, alpha=0.35, lw=0.8)
+        left.scatter(x0 + jitter, part["p_spill_before"], color=color, s=10, zorder=3)
+        left.scatter(x1 + jitter, part["p_spill_after"], color=color, s=10, zorder=3, marker="D")
+        right.boxplot([part["guidance_displacement"].dropna()], positions=[i], widths=0.6, showfliers=False)
+        right.scatter(i + rng.uniform(-0.12, 0.12, len(part)), part["guidance_displacement"], color=color, s=10, zorder=3)
+    names = [str(rows.loc[rows["variant"] == v, "variant_name"].iloc[0]) for v in variants]
+    left.set_xticks([3 * i + k for i in range(len(variants)) for k in (0, 1)],
+                    [f"{n}\nbefore" if k == 0 else "after" for n in names for k in (0, 1)], fontsize=8)
+    left.set_ylabel("predicted P(spill), mean over plans")
+    left.set_ylim(-0.02, 1.02)
+    left.set_title("P(spill) before and after guidance (lines: one episode)")
+    right.set_xticks(range(len(variants)), names, fontsize=8)
+    right.set_ylabel("displacement per plan (normalized units)")
+    right.set_title("How far guidance moved the plan")
+    return _save(fig, path)
+

@@ -1,0 +1,122 @@
+"""Replaying recorded evaluation episodes: the replay reproduces the record exactly, says where it does not, films it."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import imageio.v2 as imageio
+import pandas as pd
+import pytest
+
+from grits_lab.cli import main
+from grits_lab.errors import InputError, StorageError
+from grits_lab.evaluation.replay import replay_episode
+from grits_lab.sim.config import CameraConfig
+
+SMALL_CAMERA = CameraConfig(name="video", eye=(1.08, 0.14, 0.6), target=(0.47, 0.12, 0.07), fov_deg=50.0, width=96, height=72)
+
+
+@pytest.fixture(scope="module")
+def run(recorded_run):
+    return recorded_run
+
+
+def episode(records: pd.DataFrame, method: str) -> dict:
+    row = records[records["method"] == method].iloc[0]
+    return {"method": method, "food": row["food"], "level": row["level"], "trial": int(row["trial"])}
+
+
+@pytest.mark.parametrize("method", ["dp", "grits"])
+def test_a_replay_reproduces_every_recorded_metric(run, method):
+    run_dir, records = run
+    result = replay_episode(run_dir, **episode(records, method))
+    assert result.matches, result.describe()
+    for column in ("spilled", "scooped", "spillage", "scoop_success", "task_success", "first_spill_step", "n_plans", "spoon_coverage"):
+        assert column in result.compared
+    if method == "grits":
+        assert "p_spill_after" in result.compared and result.rho == 2.5 and result.s == 30
+
+
+def test_a_filmed_replay_is_the_same_episode_and_writes_a_captioned_video(run, tmp_path):
+    run_dir, records = run
+    video = tmp_path / "dp.mp4"
+    result = replay_episode(run_dir, **episode(records, "dp"), video=video, camera=SMALL_CAMERA, every=5)
+    assert result.matches, result.describe()
+    steps = int(result.replayed["scoop_steps"])
+    reader = imageio.get_reader(video)
+    try:
+        frames = reader.count_frames()
+        first = reader.get_data(0)
+    finally:
+        reader.close()
+    assert frames == result.frames and frames >= steps // 5 + 1
+    # 72 rows of scene under a caption band, padded by the encoder to a multiple of 16.
+    assert first.shape[1] == 96 and first.shape[0] >= 72 + 2 * 18
+    assert first[:20].mean() < first[50:].mean()  # the dark caption band sits on top
+
+
+def test_a_record_that_disagrees_with_its_episode_is_reported_with_the_column(run, tmp_path):
+    run_dir, records = run
+    tampered = tmp_path / "tampered"
+    tampered.mkdir()
+    (tampered / "config.yaml").write_text((run_dir / "config.yaml").read_text())
+    frame = records.copy()
+    frame.loc[frame["method"] == "dp", "scooped"] += 1
+    frame.to_parquet(tampered / "episodes.parquet")
+    result = replay_episode(tampered, **episode(records, "dp"))
+    assert not result.matches and list(result.mismatches) == ["scooped"]
+    assert "DIVERGED" in result.describe() and "scooped" in result.describe()
+
+
+def test_a_checkpoint_that_changed_since_the_record_stops_the_replay(run, tmp_path):
+    run_dir, records = run
+    changed = tmp_path / "changed"
+    changed.mkdir()
+    (changed / "config.yaml").write_text((run_dir / "config.yaml").read_text())
+    frame = records.copy()
+    frame["checkpoint_policy"] = "0" * 16
+    frame.to_parquet(changed / "episodes.parquet")
+    with pytest.raises(StorageError, match="checkpoint `policy`.*digest"):
+        replay_episode(changed, **episode(records, "dp"))
+
+
+def test_an_episode_that_was_not_recorded_names_what_was(run):
+    run_dir, records = run
+    with pytest.raises(InputError, match="no record of method 'dp'.*trial 7"):
+        replay_episode(run_dir, **{**episode(records, "dp"), "trial": 7})
+
+
+def test_the_replay_command_prints_one_json_object_and_exits_0_on_a_match(run, capsys):
+    run_dir, records = run
+    e = episode(records, "grits")
+    code = main(["replay", str(run_dir), "--method", "grits", "--food", e["food"], "--level", e["level"], "--trial", "0", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["matches"] is True and out["seed"] == int(records["seed"].iloc[0])
+    assert main(["replay", str(run_dir), "--method", "dp", "--food", e["food"], "--level", e["level"], "--trial", "0", "--video", "x.avi"]) == 2
+
+
+
+def test_report_videos_replay_dp_beside_grits_on_the_same_seed(run, tmp_path):
+    from functools import partial
+
+    from grits_lab.report import build_report
+
+    run_dir, records = run
+    out = tmp_path / "report"
+    build_report(run_dir, out, videos=1, replay=partial(replay_episode, camera=SMALL_CAMERA, every=5))
+    html = (out / "report.html").read_text()
+    sources = re.findall(r'<video [^>]*src="([^"]+)"', html)
+    e = episode(records, "dp")
+    assert sources == [f"videos/{e['food']}-{e['level']}-0-dp.mp4", f"videos/{e['food']}-{e['level']}-0-grits.mp4"]
+    assert all((out / s).stat().st_size > 0 for s in sources)
+    assert html.count("replay reproduces the record") == 2
+
+
+def test_report_videos_need_an_evaluation_run_directory(tmp_path, capsys):
+    records = tmp_path / "only-records"
+    records.mkdir()
+    pd.DataFrame([{"method": "dp", "food": "sago", "level": "low", "task_success": True, "spillage": False,
+                   "scoop_failure": False}]).to_parquet(records / "episodes.parquet")
+    assert main(["report", str(records), "--videos", "1"]) == 2
+    assert "lacks config.yaml" in capsys.readouterr().err

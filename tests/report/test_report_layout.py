@@ -1,0 +1,126 @@
+"""The report page's layout (headline first, missing cells collapsed, wide tables in their own box) and the video rule."""
+
+from __future__ import annotations
+
+import re
+from types import SimpleNamespace
+
+import pandas as pd
+import pytest
+
+from grits_lab.report import build_report, normalize_records
+from grits_lab.report.videos import choose_episodes, film_picks
+from synthetic_records import episode, plausible_run
+
+
+@pytest.fixture(scope="module")
+def page(tmp_path_factory):
+    run = tmp_path_factory.mktemp("layout")
+    plausible_run(0, skip={"dp": ["fudge"]}).to_parquet(run / "episodes.parquet", index=False)
+    result = build_report(run)
+    return result, (result.out_dir / "report.html").read_text()
+
+
+def test_the_page_opens_with_the_headline_comparison_with_counts(page):
+    result, html = page
+    frame = plausible_run(0, skip={"dp": ["fudge"]})
+    body = html.split("</nav>", 1)[1]
+    first_section = body.split("</section>", 1)[0]
+    assert "Headline: Diffusion Policy vs GRITS" in first_section
+    for method in ("dp", "grits"):
+        rows = frame[frame["method"] == method]
+        k, n = int(rows["spillage"].sum()), len(rows)
+        assert f"({k}/{n})" in first_section and f"spilled in {k} of {n} episodes" in first_section
+    headline = next(t for t in result.tables if t.key == "headline")
+    assert list(headline.display.columns) == ["Method", "Episodes", "Task success", "Spillage", "Scoop failure"]
+
+
+def test_missing_cells_are_listed_only_inside_collapsed_details(page):
+    result, html = page
+    assert result.missing  # DP has no fudge episodes
+    outside = re.sub(r"<details.*?</details>", "", html, flags=re.S)
+    assert "Missing (no episode records)" not in outside and "Missing" in html
+    overview = html.split('<h2>Overview</h2>', 1)[1].split("</section>", 1)[0]
+    assert "<details class=missing><summary>Missing data:" in overview
+
+
+def test_every_table_sits_in_its_own_scrolling_box(page):
+    _, html = page
+    tables = html.count('<table')
+    assert tables > 5 and html.count('<div class="scroll"><table') == tables
+    assert re.search(r"div\.scroll\{[^}]*overflow-x:auto", html)
+
+
+def test_a_plain_report_replays_nothing(page):
+    result, html = page
+    assert "<video" not in html and not (result.out_dir / "videos").exists()
+
+
+def picks_for(rows: list[dict], per_food: int) -> list:
+    return choose_episodes(normalize_records(pd.DataFrame(rows)), per_food)
+
+
+def test_videos_prefer_the_seed_where_dp_spilled_and_grits_did_not():
+    rows = []
+    outcomes = {0: ("success", "success"), 1: ("spill", "spill"), 2: ("spill", "success"), 3: ("success", "spill")}
+    for trial, (dp, grits) in outcomes.items():
+        rows += [episode("dp", "sago", "low", trial, dp), episode("grits", "sago", "low", trial, grits)]
+    picks = picks_for(rows, 4)
+    assert [p.trial for p in picks] == [2, 1, 3, 0]
+    assert picks[0].methods == ["dp", "grits"] and picks[0].reason == "Diffusion Policy spilled, GRITS did not"
+    assert [p.trial for p in picks_for(rows, 1)] == [2]
+
+
+def test_videos_break_ties_by_level_then_trial_and_skip_errored_episodes():
+    rows = []
+    for level in ("high", "low"):
+        for trial in (1, 0):
+            rows += [episode("dp", "penne", level, trial, "spill", error="sim crashed" if (level, trial) == ("low", 0) else ""),
+                     episode("grits", "penne", level, trial, "success")]
+    assert [(p.level, p.trial) for p in picks_for(rows, 3)] == [("low", 1), ("high", 0), ("high", 1)]
+
+
+def test_a_food_recorded_for_one_method_only_shows_that_method():
+    rows = [episode("grits", "fudge", "low", t, "spill" if t == 1 else "success") for t in range(3)]
+    picks = picks_for(rows, 1)
+    assert len(picks) == 1 and picks[0].methods == ["grits"] and picks[0].trial == 1
+
+
+def test_a_replay_that_cannot_run_is_shown_with_its_reason(tmp_path):
+    from grits_lab.errors import StorageError
+
+    def replay(run_dir, *, method, food, level, trial, video):
+        if method == "dp":
+            raise StorageError("checkpoint `policy` changed")
+        video.parent.mkdir(parents=True, exist_ok=True)
+        video.write_bytes(b"")
+        return SimpleNamespace(replayed={"task_success": True, "spilled_total": 0, "scoop_success": True},
+                               describe=lambda: "replay reproduces the record")
+
+    rows = [episode("dp", "sago", "low", 0, "spill"), episode("grits", "sago", "low", 0, "success")]
+    [row] = film_picks(tmp_path, picks_for(rows, 1), replay, tmp_path)
+    dp, grits = row.videos
+    assert dp.path is None and "checkpoint `policy` changed" in dp.caption
+    assert grits.path == "videos/sago-low-0-grits.mp4" and "reproduces" in grits.caption
+
+
+def test_guidance_distributions_per_method_from_the_records(tmp_path):
+    from grits_lab.report.guidance import guided_episodes
+
+    frame = plausible_run(1)
+    guided = frame["method"].isin(["grits", "dp_post"])
+    frame["guided_steps"] = guided.astype(int) * 6
+    frame["p_spill_before"] = frame["trial"].map({0: 0.2, 1: 0.4, 2: 0.6, 3: 0.8, 4: 0.9}).where(guided)
+    frame["p_spill_after"] = (frame["p_spill_before"] - 0.1).where(guided)
+    frame["guidance_displacement"] = 0.5
+    frame.loc[frame["trial"] == 4, "p_spill_after"] = 0.95  # guidance raised it once per (food, level)
+    frame.to_parquet(tmp_path / "episodes.parquet", index=False)
+    result = build_report(tmp_path)
+    table = next(t for t in result.tables if t.key == "guidance")
+    assert list(table.data["variant"]) == ["dp_post", "grits"]  # dp and the rest have no guided steps
+    grits = table.data.set_index("variant").loc["grits"]
+    errors = int(normalize_records(frame).query("method == 'grits'")["is_error"].sum())
+    assert grits["episodes"] == 100 - errors and grits["p_spill_before_median"] == pytest.approx(0.6)
+    assert grits["lowered"] == len(guided_episodes(normalize_records(frame)).query("method == 'grits' and trial != 4"))
+    assert (result.out_dir / "figures" / "guidance.png").stat().st_size > 0
+    assert "Guidance: what it changed" in (result.out_dir / "report.html").read_text()
