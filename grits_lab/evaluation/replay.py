@@ -77,6 +77,10 @@ def _is_nan(value: Any) -> bool:
 
 
 def _plain(value: Any) -> Any:
+    if isinstance(value, np.ndarray):  # list columns (per-plan diagnostics) come back from Parquet as arrays
+        return [_plain(v) for v in value.tolist()]
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
     if isinstance(value, np.generic):
         value = value.item()
     return None if _is_nan(value) else value

@@ -12,13 +12,13 @@ from gymnasium.utils.env_checker import check_env
 import grits_lab.sim  # noqa: F401  (registers grits_lab/Scoop-v0)
 from grits_lab.errors import InputError
 from grits_lab.sim import ENV_ID, ScoopEnv, ScoopGymEnv, nominal_expert_trajectory
-from grits_lab.sim.foods import load_foods
+from grits_lab.sim.foods import level_count, load_foods
 
 
 def smallest_food_level() -> tuple[str, str]:
     """The (food, level) with the fewest particles in the library: the cheapest world to build."""
     library = load_foods()
-    return min(((count, name, level) for name in library.names() for level, count in library.get(name).levels.items()))[1:]
+    return min((level_count(library.get(name), name, level), name, level) for name in library.names() for level in library.get(name).levels)[1:]
 
 
 FOOD, LEVEL = smallest_food_level()
