@@ -6,6 +6,13 @@ estimate, mean over the episode's plans), `p_spill_after` (after the last guided
 `guidance_displacement` (norm of the summed guidance updates of a plan, in normalized action
 units over the whole (horizon x 9) plan, mean over the episode's plans). Only episodes with at
 least one guided step are drawn; methods without guidance have none.
+
+Records that compared every plan with the unguided sample from the same noise
+(`guidance.compare_unguided`, the default) are read from those columns instead: P(spill) before
+= of the unguided sample (`p_spill_unguided`), after = of the executed sample (`p_spill_guided`),
+displacement = how far the executed chunk's spoon positions moved, in millimetres per waypoint
+(`guidance_displacement_mm`); their per-plan lists (`plan_*`) give the share of plans in which
+guidance lowered P(spill).
 """
 
 from __future__ import annotations
@@ -29,7 +36,27 @@ def guided_episodes(episodes: pd.DataFrame | None) -> pd.DataFrame:
     rows = episodes[(steps > 0) & ~episodes["is_error"]].copy()
     for column in GUIDANCE_COLUMNS:
         rows[column] = pd.to_numeric(rows[column], errors="coerce")
+    rows["displacement_unit"] = "normalized"
+    if {"p_spill_unguided", "p_spill_guided", "guidance_displacement_mm"} <= set(rows.columns):
+        compared = np.isfinite(pd.to_numeric(rows["p_spill_unguided"], errors="coerce"))
+        for target, source in zip(GUIDANCE_COLUMNS, ("p_spill_unguided", "p_spill_guided", "guidance_displacement_mm")):
+            rows.loc[compared, target] = pd.to_numeric(rows.loc[compared, source], errors="coerce")
+        rows.loc[compared, "displacement_unit"] = "mm"
     return rows[np.isfinite(rows["p_spill_before"]) & np.isfinite(rows["p_spill_after"])]
+
+
+def plans_lowered(part: pd.DataFrame) -> tuple[int, int]:
+    """(plans whose executed sample has a lower P(spill) than the unguided one, plans compared)."""
+    if "plan_p_spill_unguided" not in part.columns:
+        return 0, 0
+    lowered = total = 0
+    for before, after in zip(part["plan_p_spill_unguided"], part["plan_p_spill_guided"]):
+        if before is None or after is None or (isinstance(before, float) and np.isnan(before)):
+            continue
+        b, a = np.asarray(before, dtype=float), np.asarray(after, dtype=float)
+        lowered += int((a < b).sum())
+        total += len(b)
+    return lowered, total
 
 
 def guidance_table(rows: pd.DataFrame) -> ReportTable:
@@ -47,11 +74,18 @@ def guidance_table(rows: pd.DataFrame) -> ReportTable:
         lowered = int((part["p_spill_after"] < part["p_spill_before"]).sum())
         entry["Lowered P(spill)"] = f"{lowered}/{len(part)}"
         numbers["lowered"] = lowered
+        plans_low, plans = plans_lowered(part)
+        if plans:
+            entry["Plans with lower P(spill)"] = f"{plans_low}/{plans}"
+            numbers.update({"plans_lowered": plans_low, "plans": plans})
+        entry["Displacement unit"] = "/".join(sorted(part["displacement_unit"].unique()))
         shown.append(entry)
         data.append(numbers)
     return ReportTable("guidance", "Guidance: P(spill) before and after, displacement",
-                       "Per guided episode, the mean over its plans; cells: median [quartiles]. Displacement: norm of a plan's "
-                       "summed guidance updates over its whole horizon x 9 plan, in normalized action units.",
+                       "Per guided episode, the mean over its plans; cells: median [quartiles]. Before / after: P(spill) of the "
+                       "unguided sample from the same noise and of the executed sample; displacement: mean distance between their "
+                       "executed spoon positions, mm per waypoint (records without the comparison: first and last guided estimate, "
+                       "and the norm of the summed updates in normalized action units).",
                        pd.DataFrame(shown), pd.DataFrame(data))
 
 
@@ -81,7 +115,8 @@ def guidance_figure(rows: pd.DataFrame, path: Path) -> Path:
     left.set_ylim(-0.02, 1.02)
     left.set_title("P(spill) before and after guidance (lines: one episode)")
     right.set_xticks(range(len(variants)), names, fontsize=8)
-    right.set_ylabel("displacement per plan (normalized units)")
+    units = "/".join(sorted(rows["displacement_unit"].unique())) if "displacement_unit" in rows.columns else "normalized"
+    right.set_ylabel(f"displacement per plan ({'mm per waypoint' if units == 'mm' else units})")
     right.set_title("How far guidance moved the plan")
     return _save(fig, path)
 

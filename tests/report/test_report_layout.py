@@ -6,6 +6,7 @@ import re
 from types import SimpleNamespace
 
 import pandas as pd
+import numpy as np
 import pytest
 
 from grits_lab.report import build_report, normalize_records
@@ -124,3 +125,23 @@ def test_guidance_distributions_per_method_from_the_records(tmp_path):
     assert grits["lowered"] == len(guided_episodes(normalize_records(frame)).query("method == 'grits' and trial != 4"))
     assert (result.out_dir / "figures" / "guidance.png").stat().st_size > 0
     assert "Guidance: what it changed" in (result.out_dir / "report.html").read_text()
+
+
+def test_guidance_reads_the_unguided_comparison_per_plan_when_recorded(tmp_path):
+    frame = plausible_run(1)
+    guided = frame["method"] == "grits"
+    frame["guided_steps"] = guided.astype(int) * 6
+    for column in ("p_spill_before", "p_spill_after", "guidance_displacement"):
+        frame[column] = np.where(guided, 0.5, np.nan)
+    frame["p_spill_unguided"] = np.where(guided, 0.3, np.nan)
+    frame["p_spill_guided"] = np.where(guided, 0.2, np.nan)
+    frame["guidance_displacement_mm"] = np.where(guided, 4.0, np.nan)
+    # Two plans per episode: guidance lowered P(spill) in the first and raised it in the second.
+    frame["plan_p_spill_unguided"] = [[0.4, 0.2] if g else None for g in guided]
+    frame["plan_p_spill_guided"] = [[0.1, 0.3] if g else None for g in guided]
+    frame.to_parquet(tmp_path / "episodes.parquet", index=False)
+    table = next(t for t in build_report(tmp_path).tables if t.key == "guidance")
+    grits = table.data.set_index("variant").loc["grits"]
+    assert grits["p_spill_before_median"] == pytest.approx(0.3) and grits["p_spill_after_median"] == pytest.approx(0.2)
+    assert grits["guidance_displacement_median"] == pytest.approx(4.0)
+    assert grits["plans"] == 2 * grits["episodes"] and grits["plans_lowered"] == grits["episodes"]
