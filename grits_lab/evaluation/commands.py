@@ -44,6 +44,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     replay.add_argument("--trial", type=int, required=True, help="trial index within (food, level), 0-based")
     replay.add_argument("--video", default=None, help="write a captioned video: FILE.mp4 (H.264) or FILE.gif")
     replay.add_argument("--every", type=int, default=1, help="render every k-th action (default 1: every 0.1 s)")
+    replay.add_argument("--plan-figure", default=None, metavar="FILE.png",
+                        help="draw one guided plan: the unguided and guided executed chunks (same noise) over the composite cloud, with P(spill) of each")
+    replay.add_argument("--plan", type=int, default=None, help="which plan to draw (default: the one guidance moved farthest)")
     replay.add_argument("--json", action="store_true", help="print exactly one JSON object")
     replay.set_defaults(handler=_replay)
 
@@ -84,12 +87,16 @@ def _replay(args: argparse.Namespace) -> int:
         check_video_path(args.video)  # before the simulator starts
     if args.every < 1:
         raise InputError(f"--every must be at least 1. Got {args.every}.")
+    if args.plan_figure is not None and not args.plan_figure.endswith(".png"):
+        raise InputError(f"--plan-figure must name a .png file. Got {args.plan_figure!r}.")
     result = replay_episode(args.run_dir, method=args.method, food=args.food, level=args.level, trial=args.trial,
-                            video=args.video, every=args.every)
+                            video=args.video, every=args.every, plan_figure=args.plan_figure, plan=args.plan)
     if args.json:
         print(json.dumps(result.to_dict()))
     else:
         print(result.describe())
         if result.video:
             print(f"video: {result.video} ({result.frames} frames)")
+        if result.plan_figure:
+            print(f"guidance picture: {result.plan_figure}")
     return 0 if result.matches else 1

@@ -133,10 +133,14 @@ class DiffusionController(LearnedController):
             self.sampler = policy.sampler
         self.plans = 0
         self.seed = 0
+        # With `capture_plans`, every guided plan keeps what a guidance picture needs (`captured`).
+        self.capture_plans = False
+        self.captured: list[dict[str, Any]] = []
 
     def reset(self, scene: Any) -> None:
         self.plans = 0
         self.seed = scene.seed
+        self.captured = []
 
     def plan(self, history: ObsHistory, scene: Any) -> Chunk:
         from grits_lab.spillage import SpillageObjective
@@ -154,7 +158,20 @@ class DiffusionController(LearnedController):
         diagnostics = plan.result.summary()
         if plan.result.unguided is not None:
             diagnostics["displacement_mm"] = self.executed_displacement_mm(plan.result.unguided, plan.result.sample)
+            if self.capture_plans:
+                self.captured.append({
+                    "plan": self.plans - 1, "cloud": np.asarray(cloud, dtype=np.float32),
+                    "unguided": self.executed_positions(plan.result.unguided), "guided": self.executed_positions(plan.result.sample),
+                    "p_spill_unguided": diagnostics["p_spill_unguided"], "p_spill_guided": diagnostics["p_spill_guided"],
+                    "displacement_mm": diagnostics["displacement_mm"],
+                })
         return Chunk(plan.actions[0], diagnostics, time.perf_counter() - start)
+
+    def executed_positions(self, sample: torch.Tensor) -> np.ndarray:
+        """(n_action_steps, 3) spoon positions (world, m) of the executed chunk of a normalized sample (first in batch)."""
+        start = self.policy.config.action_start
+        chunk = sample[:1, start : start + self.n_action_steps].detach().double()
+        return self.policy.action_normalizer.unnormalize(chunk)[0, :, :3].cpu().numpy()
 
     def executed_displacement_mm(self, unguided: torch.Tensor, guided: torch.Tensor) -> float:
         """Mean distance (mm) between the spoon positions of the unguided and guided executed chunks, per waypoint."""

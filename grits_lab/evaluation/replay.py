@@ -42,6 +42,7 @@ class ReplayResult:
     video: str | None = None
     frames: int = 0
     replayed: dict[str, Any] = field(default_factory=dict)
+    plan_figure: str | None = None
 
     @property
     def matches(self) -> bool:
@@ -52,7 +53,7 @@ class ReplayResult:
             "method": self.method, "food": self.food, "level": self.level, "trial": self.trial, "seed": self.seed,
             "rho": None if math.isnan(self.rho) else self.rho, "s": self.s, "matches": self.matches,
             "compared": self.compared, "mismatches": {k: [_plain(a), _plain(b)] for k, (a, b) in self.mismatches.items()},
-            "video": self.video, "frames": self.frames,
+            "video": self.video, "frames": self.frames, "plan_figure": self.plan_figure,
         }
 
     def describe(self) -> str:
@@ -190,19 +191,22 @@ class _FilmedEnv:
 
 
 def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, trial: int, video: str | Path | None = None,
-                   camera: Any = None, every: int = 1) -> ReplayResult:
+                   camera: Any = None, every: int = 1, plan_figure: str | Path | None = None, plan: int | None = None) -> ReplayResult:
     """Re-run one recorded evaluation episode and compare its metrics with the record.
 
     video: `.mp4` or `.gif` path for a captioned video (None: no rendering at all); camera: a
     `CameraConfig` (default `grits_lab.sim.video.VIDEO_CAMERA`, 480 x 360); every: render every
-    k-th action. Raises InputError (no such record, no config), StorageError (a checkpoint whose
+    k-th action. plan_figure: a `.png` path for the guidance picture of one guided plan (`plan`,
+    default the plan guidance moved farthest): the unguided and guided executed chunks from the
+    same noise over the composite cloud, with P(spill) of each (grits_lab.report.guidance.plan_figure);
+    InputError for a method without guidance. Raises InputError (no such record, no config), StorageError (a checkpoint whose
     digest differs from the record's) or ConfigError (a config that no longer loads).
     """
     import torch
 
     from grits_lab.config import config_from_dict
     from grits_lab.evaluation.episode import run_episode
-    from grits_lab.evaluation.methods import build_controller
+    from grits_lab.evaluation.methods import METHODS, build_controller
     from grits_lab.perception.scene import builder_for_env
     from grits_lab.sim import SimConfig
     from grits_lab.sim.env import ScoopEnv
@@ -222,6 +226,10 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
     try:
         builder = builder_for_env(config.cloud, env)
         controller = build_controller(method, config, paths, lambda key, factory: cache[key] if key in cache else cache.setdefault(key, factory()))
+        if plan_figure is not None:
+            if not hasattr(controller, "capture_plans") or METHODS[method].sampler not in ("guided", "posthoc"):
+                raise InputError(f"--plan-figure needs a guided method (grits*, dp_post); {method!r} has no guidance to draw")
+            controller.capture_plans = True
         seed = int(record["seed"])
         played: Any = env
         if video is not None:
@@ -237,4 +245,14 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
     if video is not None:
         result.video = str(write_video(video, played.frames, fps=sim_config.control_hz / played._every))
         result.frames = len(played.frames)
+    if plan_figure is not None:
+        from grits_lab.report.guidance import plan_figure as draw_plan
+
+        captured = controller.captured
+        if not captured:
+            raise InputError(f"the replayed {method} episode made no guided plan to draw")
+        chosen = max(captured, key=lambda c: c["displacement_mm"]) if plan is None else next((c for c in captured if c["plan"] == plan), None)
+        if chosen is None:
+            raise InputError(f"--plan {plan}: the episode's guided plans are {[c['plan'] for c in captured]}")
+        result.plan_figure = str(draw_plan(chosen, Path(plan_figure), f"{method} {food}/{level} trial {trial}: "))
     return result

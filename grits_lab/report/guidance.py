@@ -120,3 +120,34 @@ def guidance_figure(rows: pd.DataFrame, path: Path) -> Path:
     right.set_title("How far guidance moved the plan")
     return _save(fig, path)
 
+
+
+def plan_figure(plan: dict, path: Path, title: str = "") -> Path:
+    """One guided plan drawn over its composite cloud: the executed chunk of the unguided sample
+    (same noise, dashed) and of the guided one (solid), top view (x-y) and side view (x-z).
+
+    plan: a `DiffusionController.captured` entry: `cloud` (3, N, 3) food / spoon / bowl points
+    (world, m), `unguided` and `guided` (n_action_steps, 3) spoon positions (m), their
+    `p_spill_unguided` / `p_spill_guided` and `displacement_mm`.
+    """
+    from grits_lab.report.figures import _save, plt
+
+    cloud = np.asarray(plan["cloud"], dtype=float)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.6))
+    for ax, (i, j, labels) in zip(axes, [(0, 1, ("x (m)", "y (m)")), (0, 2, ("x (m)", "z (m)"))]):
+        for obj, (name, color, size) in enumerate([("food", "#c98b2b", 6), ("spoon", "#777777", 3), ("bowl", "#9ecae1", 2)]):
+            pts = cloud[obj]
+            ax.scatter(pts[:, i], pts[:, j], s=size, color=color, alpha=0.5, label=name, linewidths=0)
+        for key, style, color in (("unguided", "--", "#1f77b4"), ("guided", "-", "#d62728")):
+            xyz = np.asarray(plan[key], dtype=float)
+            p = plan[f"p_spill_{key}"]
+            ax.plot(xyz[:, i], xyz[:, j], style, color=color, lw=2, marker="o", ms=3, label=f"{key}: P(spill) {p:.3f}")
+            ax.scatter(xyz[:1, i], xyz[:1, j], color=color, s=40, marker="s", zorder=4)
+        ax.set_xlabel(labels[0])
+        ax.set_ylabel(labels[1])
+        ax.set_aspect("equal", adjustable="datalim")
+    axes[0].legend(fontsize=7, loc="best")
+    axes[0].set_title("top view")
+    axes[1].set_title("side view")
+    fig.suptitle(f"{title}plan {plan['plan']}: guidance moved the executed chunk {plan['displacement_mm']:.1f} mm per waypoint", fontsize=10)
+    return _save(fig, path)

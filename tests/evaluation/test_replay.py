@@ -120,3 +120,16 @@ def test_report_videos_need_an_evaluation_run_directory(tmp_path, capsys):
                    "scoop_failure": False}]).to_parquet(records / "episodes.parquet")
     assert main(["report", str(records), "--videos", "1"]) == 2
     assert "lacks config.yaml" in capsys.readouterr().err
+
+
+def test_a_replay_draws_a_guided_plan_over_its_cloud(run, tmp_path, capsys):
+    run_dir, records = run
+    picked = episode(records, "grits")
+    result = replay_episode(run_dir, **picked, plan_figure=tmp_path / "plan.png")
+    assert result.matches, result.describe()
+    image = imageio.imread(tmp_path / "plan.png")
+    assert image.shape[0] > 200 and image.shape[1] > 400 and image.std() > 0
+    # dp has no guidance to draw: one clear error, before any figure.
+    code = main(["replay", str(run_dir), "--method", "dp", "--food", picked["food"], "--level", picked["level"],
+                 "--trial", str(picked["trial"]), "--plan-figure", str(tmp_path / "dp.png")])
+    assert code == 2 and "no guidance to draw" in capsys.readouterr().err and not (tmp_path / "dp.png").exists()
