@@ -38,6 +38,7 @@ class ParticleCounts:
     in_target: np.ndarray
     outside_source: np.ndarray
     lifted: np.ndarray  # in the spoon and above the source bowl's rim
+    in_source: np.ndarray | None = None  # inside the source bowl: within its outer rim radius, below its rim
 
 
 def in_spoon_mask(positions: np.ndarray, spoon_pose: np.ndarray, spoon: SpoonGeometry) -> np.ndarray:
@@ -75,6 +76,7 @@ def classify(positions: np.ndarray, spoon_pose: np.ndarray, source_position: np.
         in_target=in_bowl_cylinder(positions, target_position, target, above=0.03),
         outside_source=outside_bowl(positions, source_position, source),
         lifted=lifted,
+        in_source=in_bowl_cylinder(positions, source_position, source, above=0.0),
     )
 
 
@@ -116,12 +118,12 @@ class SpillTracker:
     where each spilled particle left from (its spill mechanism).
 
     Mechanisms, from the last check (one per action, 10 Hz) before a particle was first spilled:
-    - over_rim: it was not in the spoon: it left the bowl over the rim (pushed by the drag, or
-      rolling off a heap).
-    - off_spoon: it was in the spoon and the spoon was outside the source bowl's footprint (it fell
-      off the spoon on the way out or during the transfer).
-    - elsewhere: it was in the spoon above the bowl and still landed outside it (bounced over the
-      rim after falling off the spoon).
+    - over_rim: it lay in the bowl (below the rim) and not in the spoon: it left over the rim
+      (pushed by the drag, or rolling off a heap).
+    - off_spoon: otherwise, when the spoon was outside the source bowl's footprint: it fell off the
+      spoon, or off the heap the spoon carries, on the way out or during the transfer.
+    - elsewhere: otherwise: it was on the spoon (or its heap) above the bowl and still landed
+      outside it (bounced over the rim after falling).
     """
 
     def __init__(self, n_particles: int) -> None:
@@ -129,19 +131,20 @@ class SpillTracker:
         self.mechanism = np.full(n_particles, -1, dtype=np.int8)  # index into SPILL_MECHANISMS, -1 not spilled
         self.history: list[int] = []
         self.first_spill_step = -1
-        self._was_in_spoon = np.zeros(n_particles, dtype=bool)
+        self._was_in_bowl = np.zeros(n_particles, dtype=bool)
         self._spoon_was_outside = False
 
     def observe(self, counts: ParticleCounts, spoon_outside_source: bool) -> None:
         """Remember where particles and spoon are (the reference for the next update's mechanisms)."""
-        self._was_in_spoon = counts.in_spoon.copy()
+        in_source = counts.in_source if counts.in_source is not None else ~counts.outside_source
+        self._was_in_bowl = in_source & ~counts.in_spoon
         self._spoon_was_outside = bool(spoon_outside_source)
 
     def update(self, counts: ParticleCounts, spoon_outside_source: bool = False) -> int:
         now = counts.outside_source & ~counts.in_spoon & ~counts.in_target
         new = now & ~self.spilled_flags
         if new.any():
-            kind = np.where(~self._was_in_spoon[new], 0, 1 if self._spoon_was_outside else 2)
+            kind = np.where(self._was_in_bowl[new], 0, 1 if self._spoon_was_outside else 2)
             self.mechanism[new] = kind
         self.spilled_flags |= now
         self.observe(counts, spoon_outside_source)
