@@ -32,6 +32,10 @@ class Chunk:
     actions: np.ndarray  # (k, 9) world-frame spoon poses
     diagnostics: dict[str, Any] = field(default_factory=dict)
     plan_time_s: float = 0.0
+    # (k, 9) the unguided sample's chunk from the same noise, when the sampler made one: what the
+    # policy itself proposes, on which "the policy holds" is judged (guidance refines a motion;
+    # it is not the policy asking to move on).
+    unguided_actions: np.ndarray | None = None
 
 
 class ObsHistory:
@@ -165,7 +169,12 @@ class DiffusionController(LearnedController):
                     "p_spill_unguided": diagnostics["p_spill_unguided"], "p_spill_guided": diagnostics["p_spill_guided"],
                     "displacement_mm": diagnostics["displacement_mm"],
                 })
-        return Chunk(plan.actions[0], diagnostics, time.perf_counter() - start)
+        unguided = None
+        if plan.result.unguided is not None:
+            start_index = self.policy.config.action_start
+            chunk = plan.result.unguided[:1, start_index : start_index + self.n_action_steps].detach().double()
+            unguided = self.policy.action_normalizer.unnormalize(chunk)[0].cpu().numpy().astype(np.float32)
+        return Chunk(plan.actions[0], diagnostics, time.perf_counter() - start, unguided_actions=unguided)
 
     def executed_positions(self, sample: torch.Tensor) -> np.ndarray:
         """(n_action_steps, 3) spoon positions (world, m) of the executed chunk of a normalized sample (first in batch)."""
@@ -195,5 +204,6 @@ class BCController(LearnedController):
 
 
 def is_still(chunk: Chunk, pose: np.ndarray, tolerance: float) -> bool:
-    """True when every action of the chunk keeps the spoon within `tolerance` of `pose`: the policy holds."""
-    return _still(chunk.actions, pose, tolerance)
+    """True when every action of the policy's own proposal (the unguided chunk from the same noise
+    when there is one, else the chunk) keeps the spoon within `tolerance` of `pose`: the policy holds."""
+    return _still(chunk.actions if chunk.unguided_actions is None else chunk.unguided_actions, pose, tolerance)

@@ -186,3 +186,15 @@ def test_rollout_chunks_are_a_dataset_the_predictor_scores(models, tmp_path):
     assert meta["label"] == int(arrays["chunk_spilled"].any()) and meta["spilled"] == records.iloc[0]["spilled"]
     predictions = predict_all({"full": Path(models["predictor"])}, dataset)
     assert len(predictions) == c and predictions["p_full"].between(0, 1).all()
+
+
+def test_the_policy_holds_when_its_own_proposal_holds_whatever_guidance_adds():
+    from grits_lab.evaluation.controllers import Chunk, is_still
+
+    pose = np.array([0.5, 0.0, 0.2, 1, 0, 0, 0, 1, 0], dtype=np.float32)
+    holding = np.repeat(pose[None], 12, 0)
+    nudged = holding.copy()
+    nudged[:, 0] += 0.01  # guidance moved the chunk 1 cm
+    assert not is_still(Chunk(nudged), pose, 0.004)
+    assert is_still(Chunk(nudged, unguided_actions=holding), pose, 0.004)
+    assert not is_still(Chunk(holding, unguided_actions=nudged), pose, 0.004)
