@@ -160,35 +160,26 @@ class DiffusionController(LearnedController):
             plan = self.policy.plan(obs, sampler=self.sampler, objective=objective, generator=generator)
         self.plans += 1
         diagnostics = plan.result.summary()
+        unguided = None
         if plan.result.unguided is not None:
-            diagnostics["displacement_mm"] = self.executed_displacement_mm(plan.result.unguided, plan.result.sample)
+            unguided = self.executed_chunk(plan.result.unguided)
+            guided = self.executed_chunk(plan.result.sample)
+            diagnostics["displacement_mm"] = float(1000.0 * np.linalg.norm(unguided[:, :3] - guided[:, :3], axis=1).mean())
             if self.capture_plans:
                 self.captured.append({
                     "plan": self.plans - 1, "cloud": np.asarray(cloud, dtype=np.float32),
-                    "unguided": self.executed_positions(plan.result.unguided), "guided": self.executed_positions(plan.result.sample),
+                    "unguided": unguided[:, :3], "guided": guided[:, :3],
                     "p_spill_unguided": diagnostics["p_spill_unguided"], "p_spill_guided": diagnostics["p_spill_guided"],
                     "displacement_mm": diagnostics["displacement_mm"],
                 })
-        unguided = None
-        if plan.result.unguided is not None:
-            start_index = self.policy.config.action_start
-            chunk = plan.result.unguided[:1, start_index : start_index + self.n_action_steps].detach().double()
-            unguided = self.policy.action_normalizer.unnormalize(chunk)[0].cpu().numpy().astype(np.float32)
-        return Chunk(plan.actions[0], diagnostics, time.perf_counter() - start, unguided_actions=unguided)
+        return Chunk(plan.actions[0], diagnostics, time.perf_counter() - start,
+                     unguided_actions=None if unguided is None else unguided.astype(np.float32))
 
-    def executed_positions(self, sample: torch.Tensor) -> np.ndarray:
-        """(n_action_steps, 3) spoon positions (world, m) of the executed chunk of a normalized sample (first in batch)."""
+    def executed_chunk(self, sample: torch.Tensor) -> np.ndarray:
+        """(n_action_steps, 9) world-frame poses of the executed chunk of a normalized sample (first in batch), float64."""
         start = self.policy.config.action_start
         chunk = sample[:1, start : start + self.n_action_steps].detach().double()
-        return self.policy.action_normalizer.unnormalize(chunk)[0, :, :3].cpu().numpy()
-
-    def executed_displacement_mm(self, unguided: torch.Tensor, guided: torch.Tensor) -> float:
-        """Mean distance (mm) between the spoon positions of the unguided and guided executed chunks, per waypoint."""
-        start = self.policy.config.action_start
-        end = start + self.n_action_steps
-        a = self.policy.action_normalizer.unnormalize(unguided[:, start:end].detach().double())[..., :3]
-        b = self.policy.action_normalizer.unnormalize(guided[:, start:end].detach().double())[..., :3]
-        return float(1000.0 * (a - b).norm(dim=-1).mean())
+        return self.policy.action_normalizer.unnormalize(chunk)[0].cpu().numpy()
 
 
 class BCController(LearnedController):

@@ -259,11 +259,12 @@ def run_episode(env: Any, controller: Any, config: Any, *, seed: int, food: str,
         "scoop_time_s": scoop_time,
         **summarize_guidance(scoop["diagnostics"]),
     }
-    transferred, spilled_total, transfer_time = 0, int(m["spilled"]), 0.0
+    transferred, spilled_total, transfer_time, final = 0, int(m["spilled"]), 0.0, m
     record.update({"target_locate_error_m": math.nan, "target_fit_residual_m": math.nan, "spilled_transfer": 0})
     if config.transfer.enabled and m["scooped"] > 0:
         t0 = time.perf_counter()
         tr = run_transfer(env, scene, config.transfer)
+        final = tr["metrics"]
         transfer_time = time.perf_counter() - t0
         transferred = int(tr["metrics"]["transferred"])
         spilled_total = int(tr["metrics"]["spilled"])
@@ -277,8 +278,7 @@ def run_episode(env: Any, controller: Any, config: Any, *, seed: int, food: str,
         "renders": scene.renders,
         "task_success": bool(m["scoop_success"]) and transferred >= needed and spilled_total == 0,
     })
-    final = env.metrics()["spill_mechanisms"]
-    record.update({f"spilled_{k}": int(v) for k, v in final.items()})
+    record.update({f"spilled_{k}": int(v) for k, v in final["spill_mechanisms"].items()})
     if record_chunks:
         n_exec = config.scoop.n_action_steps or getattr(controller, "n_action_steps", None) or 12
         record["_chunks"] = rollout_chunk_episode(scoop["chunks"], int(n_exec), {

@@ -38,7 +38,7 @@ class ParticleCounts:
     in_target: np.ndarray
     outside_source: np.ndarray
     lifted: np.ndarray  # in the spoon and above the source bowl's rim
-    in_source: np.ndarray | None = None  # inside the source bowl: within its outer rim radius, below its rim
+    in_source: np.ndarray  # inside the source bowl: within its outer rim radius, below its rim
 
 
 def in_spoon_mask(positions: np.ndarray, spoon_pose: np.ndarray, spoon: SpoonGeometry) -> np.ndarray:
@@ -136,8 +136,7 @@ class SpillTracker:
 
     def observe(self, counts: ParticleCounts, spoon_outside_source: bool) -> None:
         """Remember where particles and spoon are (the reference for the next update's mechanisms)."""
-        in_source = counts.in_source if counts.in_source is not None else ~counts.outside_source
-        self._was_in_bowl = in_source & ~counts.in_spoon
+        self._was_in_bowl = counts.in_source & ~counts.in_spoon
         self._spoon_was_outside = bool(spoon_outside_source)
 
     def update(self, counts: ParticleCounts, spoon_outside_source: bool = False) -> int:
