@@ -154,8 +154,9 @@ ROLLOUT_CHUNKS_DIR = "rollout_chunks"
 
 def write_rollout_chunks(out: Path, record: dict[str, Any], episode: dict[str, Any]) -> Path:
     """Write one episode's scoop chunks into `out/rollout_chunks/<method>/`, a spillage-kind dataset
-    that `grits-lab compare-predictors --eval` scores; the index is rebuilt after every write."""
-    from grits_lab.data.format import MANIFEST_FILE, rebuild_index, write_episode
+    that `grits-lab compare-predictors --eval` scores. The now stale index is removed; the first
+    reader rebuilds it from the episode files (`grits_lab.data.format.load_index`)."""
+    from grits_lab.data.format import INDEX_FILE, MANIFEST_FILE, write_episode
 
     dataset = out / ROLLOUT_CHUNKS_DIR / str(record["method"])
     if not (dataset / MANIFEST_FILE).exists():
@@ -168,7 +169,7 @@ def write_rollout_chunks(out: Path, record: dict[str, Any], episode: dict[str, A
     episode_id = f"{record['method']}-{record['food']}-{record['level']}-{int(record['trial'])}"
     meta = {**episode["meta"], "method": record["method"], "trial": int(record["trial"])}
     path = write_episode(dataset, episode_id, episode["arrays"], meta)
-    rebuild_index(dataset)
+    (dataset / INDEX_FILE).unlink(missing_ok=True)
     return path
 
 
