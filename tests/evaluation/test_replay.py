@@ -56,14 +56,19 @@ def test_a_filmed_replay_is_the_same_episode_and_writes_a_captioned_video(run, t
     assert first[:20].mean() < first[50:].mean()  # the dark caption band sits on top
 
 
+def run_copy(run_dir, out, frame):
+    """A run directory at `out` with `run_dir`'s config and the records `frame`."""
+    out.mkdir()
+    (out / "config.yaml").write_text((run_dir / "config.yaml").read_text())
+    frame.to_parquet(out / "episodes.parquet")
+    return out
+
+
 def test_a_record_that_disagrees_with_its_episode_is_reported_with_the_column(run, tmp_path):
     run_dir, records = run
-    tampered = tmp_path / "tampered"
-    tampered.mkdir()
-    (tampered / "config.yaml").write_text((run_dir / "config.yaml").read_text())
     frame = records.copy()
     frame.loc[frame["method"] == "dp", "scooped"] += 1
-    frame.to_parquet(tampered / "episodes.parquet")
+    tampered = run_copy(run_dir, tmp_path / "tampered", frame)
     result = replay_episode(tampered, **episode(records, "dp"))
     assert not result.matches and list(result.mismatches) == ["scooped"]
     assert "DIVERGED" in result.describe() and "scooped" in result.describe()
@@ -71,12 +76,9 @@ def test_a_record_that_disagrees_with_its_episode_is_reported_with_the_column(ru
 
 def test_a_checkpoint_that_changed_since_the_record_stops_the_replay(run, tmp_path):
     run_dir, records = run
-    changed = tmp_path / "changed"
-    changed.mkdir()
-    (changed / "config.yaml").write_text((run_dir / "config.yaml").read_text())
     frame = records.copy()
     frame["checkpoint_policy"] = "0" * 16
-    frame.to_parquet(changed / "episodes.parquet")
+    changed = run_copy(run_dir, tmp_path / "changed", frame)
     with pytest.raises(StorageError, match="checkpoint `policy`.*digest"):
         replay_episode(changed, **episode(records, "dp"))
 
