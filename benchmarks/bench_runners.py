@@ -40,7 +40,7 @@ def main() -> None:
     from grits_lab.data.spillage import make_trial_spec, source_bowl_region
     from grits_lab.runners import SerialExecutor
     from grits_lab.runners.ray_executor import RayExecutor
-    from grits_lab.runners.work import WorkerContext, execute_spec, resolve_work_path
+    from grits_lab.runners.work import WorkerContext, execute_spec
     from grits_lab.sim.config import SimConfig
 
     config = load_collect_config(args.config)
@@ -51,7 +51,6 @@ def main() -> None:
     # worker ratio measures the engine's parallelism rather than the luck of the draw.
     one = make_trial_spec(config, sim, base, bowl, args.shape, args.index)
     specs = [one.replace(episode_id=f"bench-{i:03d}") for i in range(args.episodes)]
-    specs = [s.replace(work=resolve_work_path(s.work)) for s in specs]
 
     # Warm-up: imports and the first world build are paid once per worker, not per episode.
     ctx = WorkerContext(0)

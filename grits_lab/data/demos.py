@@ -99,7 +99,7 @@ def plan_demos(config: DemosConfig) -> list[EpisodeSpec]:
                 specs.append(
                     EpisodeSpec(
                         episode_id=f"{food}-{level}-b{b}",
-                        work="demo",
+                        work=demo_episode,
                         seed=derive_seed(config.seed, "demo", food, level, b),
                         food=food,
                         level=level,
@@ -130,10 +130,11 @@ def demo_episode(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
     """
     from grits_lab.config import config_fingerprint
     from grits_lab.perception.scene import builder_for_env, camera_list, scene_clouds
+    from grits_lab.sim.env import worker_env
     from grits_lab.sim.expert import expert_trajectory
 
     p: DemoEpisodeParams = spec.params["demo"]
-    env = context.env(p.sim)
+    env = worker_env(context, p.sim)
     builder = context.cached(("cloud-builder", config_fingerprint(p.cloud)), lambda: builder_for_env(p.cloud, env))
     obs, info = env.reset(seed=spec.seed, options={"food": spec.food, "level": spec.level})
     plan = expert_trajectory(env.scene(), make_rng(derive_seed(spec.seed, "expert")), env.config.control_hz)

@@ -240,7 +240,7 @@ def make_trial_spec(config: SpillageConfig, sim: Any, base: np.ndarray, bowl: di
         exit_tilt_deg=exit_tilt,
     )
     return EpisodeSpec(
-        episode_id=candidate_id(shape, index), work="spillage", seed=seed, trajectory=traj.astype(np.float32),
+        episode_id=candidate_id(shape, index), work=spillage_trial, seed=seed, trajectory=traj.astype(np.float32),
         params={"trial": params},
     )
 
@@ -394,10 +394,11 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
     """Run one candidate: random primitive food, the spec's trajectory, clouds at every chunk start."""
     from grits_lab.config import config_fingerprint
     from grits_lab.perception.scene import builder_for_env, scene_clouds
+    from grits_lab.sim.env import worker_env
     from grits_lab.sim.foods import primitive_food
 
     p: SpillageTrialParams = spec.params["trial"]
-    env = context.env(p.sim)
+    env = worker_env(context, p.sim)
     builder = context.cached(("cloud-builder", config_fingerprint(p.cloud)), lambda: builder_for_env(p.cloud, env))
     pr = p.particles
     food, count = primitive_food(

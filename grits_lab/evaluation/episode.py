@@ -295,13 +295,14 @@ def evaluation_episode(spec: Any, context: Any) -> dict[str, Any]:
     from grits_lab.evaluation.methods import METHODS, build_controller, guidance_columns
     from grits_lab.perception.scene import builder_for_env
     from grits_lab.sim import SimConfig
+    from grits_lab.sim.env import worker_env
 
     start = time.perf_counter()
     p = spec.params["evaluation"]
     config = p.config
     torch.set_num_threads(config.num_threads)
     sim_config = config_from_dict(SimConfig, config.sim, "sim")
-    env = context.env(sim_config)
+    env = worker_env(context, sim_config)
     from grits_lab.config import config_fingerprint
 
     builder = context.cached(("cloud-builder", config_fingerprint(config.cloud)), lambda: builder_for_env(config.cloud, env))

@@ -26,6 +26,7 @@ from tqdm import tqdm
 from grits_lab.config import config_fingerprint, config_from_dict, config_to_dict
 from grits_lab.errors import ConfigError, InputError, StorageError
 from grits_lab.evaluation.config import EvaluationConfig, load_evaluation_config
+from grits_lab.evaluation.episode import evaluation_episode
 from grits_lab.evaluation.methods import (
     METHODS, check_method_checkpoints, file_digest, guidance_columns, method_checkpoints,
 )
@@ -36,7 +37,6 @@ from grits_lab.runners.base import Executor
 from grits_lab.runners.config import check_reachable, cluster_address
 from grits_lab.seeding import derive_seed
 
-EPISODE_WORK = "grits_lab.evaluation.episode:evaluation_episode"
 RECORDS_FILE = "episodes.parquet"
 IDENTITY = ("method", "food", "level", "trial", "seed", "rho", "s")
 
@@ -104,7 +104,7 @@ def build_specs(config: EvaluationConfig, keys: Iterable[EpisodeKey], methods: l
             params = EpisodeParams(config.run_id, method, key.trial, key.split, config, paths[method],
                                    {k: digests[p] for k, p in paths[method].items()})
             specs.append(EpisodeSpec(
-                episode_id=f"{method}-{key.food}-{key.level}-{key.trial}", work=EPISODE_WORK, seed=key.seed,
+                episode_id=f"{method}-{key.food}-{key.level}-{key.trial}", work=evaluation_episode, seed=key.seed,
                 food=key.food, level=key.level, params={"evaluation": params},
             ))
     return specs

@@ -10,7 +10,7 @@ from grits_lab.runners.base import Executor
 from grits_lab.runners.config import ExecutorConfig, make_executor
 from grits_lab.runners.serial import SerialExecutor
 from grits_lab.runners.spec import EpisodeResult, EpisodeSpec
-from grits_lab.runners.work import WORK_KINDS, WorkerContext, execute_spec, register_work
+from grits_lab.runners.work import WorkerContext, execute_spec, probe_episode
 
 __all__ = [
     "EpisodeResult",
@@ -18,9 +18,8 @@ __all__ = [
     "Executor",
     "ExecutorConfig",
     "SerialExecutor",
-    "WORK_KINDS",
     "WorkerContext",
     "execute_spec",
     "make_executor",
-    "register_work",
+    "probe_episode",
 ]

@@ -32,7 +32,7 @@ from ray.exceptions import GetTimeoutError, RayActorError, RayError
 from grits_lab.errors import GritsError
 from grits_lab.runners.base import Executor
 from grits_lab.runners.spec import EpisodeResult, EpisodeSpec
-from grits_lab.runners.work import WorkerContext, execute_spec, resolve_work_path
+from grits_lab.runners.work import WorkerContext, execute_spec
 
 log = logging.getLogger(__name__)
 
@@ -171,7 +171,7 @@ class RayExecutor(Executor):
         return ray.get([s.actor.peak_rss_mb.remote() for s in self._slots])
 
     def submit(self, spec: EpisodeSpec) -> None:
-        self._queue.append((spec.replace(work=resolve_work_path(spec.work)), 1))
+        self._queue.append((spec, 1))
         self._dispatch()
 
     def capacity(self) -> int:

@@ -6,7 +6,7 @@ import collections
 
 from grits_lab.runners.base import Executor
 from grits_lab.runners.spec import EpisodeResult, EpisodeSpec
-from grits_lab.runners.work import WorkerContext, execute_spec, resolve_work_path
+from grits_lab.runners.work import WorkerContext, execute_spec
 
 
 class SerialExecutor(Executor):
@@ -19,7 +19,7 @@ class SerialExecutor(Executor):
         self._context = WorkerContext(0)
 
     def submit(self, spec: EpisodeSpec) -> None:
-        self._queue.append(spec.replace(work=resolve_work_path(spec.work)))
+        self._queue.append(spec)
 
     def capacity(self) -> int:
         return 1 - len(self._queue)

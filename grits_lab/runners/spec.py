@@ -1,7 +1,6 @@
 """Episode specs and results: the picklable units of work that executors send to workers and stream back.
 
-A spec names *what* to run (`work`: a registered kind or an importable ``module:function`` path)
-and carries everything needed to replay that episode alone (its seed, food, level, trajectory and
+A spec carries *what* to run (`work`: a module-level function, pickled by reference) and everything needed to replay that episode alone (its seed, food, level, trajectory and
 free-form parameters). Nothing in a spec holds a simulator, a client or a model: those live in the
 worker and are built there, so a spec can cross process and machine boundaries.
 """
@@ -10,9 +9,12 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
+
+
+WorkFn = Callable[["EpisodeSpec", Any], Any]
 
 
 @dataclass(frozen=True)
@@ -20,8 +22,8 @@ class EpisodeSpec:
     """One episode to run.
 
     episode_id: unique name of the episode within a job (also its file name in a dataset).
-    work: registered kind (see `grits_lab.runners.work.WORK_KINDS`) or ``"package.module:function"``;
-        the function is called in the worker as ``fn(spec, context) -> payload``.
+    work: a module-level function (importable in the worker, so it pickles by reference), called
+        there as ``work(spec, context) -> payload`` with the worker's `WorkerContext`.
     seed: the episode's seed, derived from the job's root seed and the episode's identity.
     food, level: the food and quantity level, when the work is a scooping episode.
     trajectory: (T, 9) or (T, 7) commanded spoon poses, when the work replays one.
@@ -29,7 +31,7 @@ class EpisodeSpec:
     """
 
     episode_id: str
-    work: str
+    work: WorkFn
     seed: int
     food: str | None = None
     level: str | None = None

@@ -1,62 +1,22 @@
-"""Work functions and the per-worker context: how a spec's `work` name becomes a call inside a worker.
+"""Work functions and the per-worker context: what a spec's `work` callable receives inside a worker.
 
-Executors never hard-wire what an episode does. A spec names a registered kind (`WORK_KINDS`,
-extendable with `register_work`) or an importable ``module:function`` path; the worker imports the
-function and calls ``fn(spec, context)``. The `WorkerContext` keeps expensive state alive between
-episodes in the same worker: one simulator (rebuilt only when its config changes) and a generic
-cache for things such as a policy checkpoint loaded once per worker.
+Executors never hard-wire what an episode does: each spec carries its work function (a
+module-level function, so it pickles by reference) and the worker calls ``work(spec, context)``.
+The runner names no layer above it; the collection and evaluation jobs hand it their functions.
+The `WorkerContext` keeps expensive state alive between episodes in the same worker: one
+reusable resource such as a simulator (rebuilt only when its key changes, discarded after a
+failure) and a generic cache for things such as a policy checkpoint loaded once per worker.
 """
 
 from __future__ import annotations
 
-import importlib
 import os
 import socket
 import time
 import traceback as tb
 from typing import Any, Callable
 
-from grits_lab.errors import InputError
 from grits_lab.runners.spec import EpisodeResult, EpisodeSpec
-
-WorkFn = Callable[[EpisodeSpec, "WorkerContext"], Any]
-
-# kind -> "module:function". Paths (not functions) so that a worker resolves them by import and a
-# registration made in the driver travels with the spec (executors resolve names before sending).
-WORK_KINDS: dict[str, str] = {
-    "probe": "grits_lab.runners.work:probe_episode",
-    "demo": "grits_lab.data.demos:demo_episode",
-    "spillage": "grits_lab.data.spillage:spillage_trial",
-}
-
-
-def register_work(kind: str, path: str) -> None:
-    """Register `kind` as a name for the work function at ``"module:function"``."""
-    if ":" not in path:
-        raise InputError(f"work path must look like 'package.module:function'. Got {path!r}.")
-    WORK_KINDS[kind] = path
-
-
-def resolve_work_path(work: str) -> str:
-    """The ``module:function`` path a spec's `work` refers to (a registered kind or a path)."""
-    if work in WORK_KINDS:
-        return WORK_KINDS[work]
-    if ":" in work:
-        return work
-    known = ", ".join(sorted(WORK_KINDS))
-    raise InputError(f"unknown work kind {work!r}; registered kinds: {known}; or give 'module:function'")
-
-
-def import_work(path: str) -> WorkFn:
-    module_name, _, attr = resolve_work_path(path).partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as exc:
-        raise InputError(f"cannot import work module {module_name!r}: {exc}") from None
-    fn = getattr(module, attr, None)
-    if not callable(fn):
-        raise InputError(f"work function {attr!r} not found in {module_name}")
-    return fn
 
 
 class WorkerContext:
@@ -66,9 +26,8 @@ class WorkerContext:
         self.worker_index = worker_index
         self.worker = f"{socket.gethostname()}:{os.getpid()}"
         self._cache: dict[Any, Any] = {}
-        self._env: Any = None
-        self._env_key: str | None = None
-        self._functions: dict[str, WorkFn] = {}
+        self._resource: Any = None
+        self._resource_key: str | None = None
 
     def cached(self, key: Any, factory: Callable[[], Any]) -> Any:
         """`factory()` on first use of `key` in this worker, the stored value afterwards."""
@@ -76,34 +35,29 @@ class WorkerContext:
             self._cache[key] = factory()
         return self._cache[key]
 
-    def env(self, sim_config: Any) -> Any:
-        """This worker's one ScoopEnv, built here (never pickled) and rebuilt only if the config changes."""
-        from grits_lab.config import config_fingerprint
+    def reusable(self, key: str, factory: Callable[[], Any]) -> Any:
+        """The worker's one reusable resource (a simulator), built by `factory` on first use and
+        again whenever `key` changes (the old one is closed first). A work function that raises
+        discards it, so the next spec starts from a fresh one."""
+        if self._resource is None or key != self._resource_key:
+            self.discard_reusable()
+            self._resource = factory()
+            self._resource_key = key
+        return self._resource
 
-        key = config_fingerprint(sim_config)
-        if self._env is None or key != self._env_key:
-            self.close_env()
-            from grits_lab.sim.env import ScoopEnv
-
-            self._env = ScoopEnv(sim_config)
-            self._env_key = key
-        return self._env
-
-    def close_env(self) -> None:
-        if self._env is not None:
+    def discard_reusable(self) -> None:
+        """Close and forget the reusable resource (no-op when there is none)."""
+        if self._resource is not None:
             try:
-                self._env.close()
+                close = getattr(self._resource, "close", None)
+                if callable(close):
+                    close()
             finally:
-                self._env = None
-                self._env_key = None
-
-    def function(self, work: str) -> WorkFn:
-        if work not in self._functions:
-            self._functions[work] = import_work(work)
-        return self._functions[work]
+                self._resource = None
+                self._resource_key = None
 
     def close(self) -> None:
-        self.close_env()
+        self.discard_reusable()
         for value in self._cache.values():
             close = getattr(value, "close", None)
             if callable(close):
@@ -115,10 +69,10 @@ def execute_spec(spec: EpisodeSpec, context: WorkerContext) -> EpisodeResult:
     """Run one spec; an exception becomes a failed result (with its error) instead of ending the job."""
     start = time.perf_counter()
     try:
-        payload = context.function(spec.work)(spec, context)
+        payload = spec.work(spec, context)
     except Exception as exc:  # the job goes on; the failure is recorded with its cause
         # A simulator that raised mid-episode may be in any state: rebuild it for the next spec.
-        context.close_env()
+        context.discard_reusable()
         return EpisodeResult(
             episode_id=spec.episode_id,
             ok=False,

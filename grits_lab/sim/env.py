@@ -334,3 +334,11 @@ class ScoopEnv:
             self.world.close()
             self.world = None
 
+
+
+def worker_env(context: Any, config: SimConfig) -> ScoopEnv:
+    """The ScoopEnv a runner worker keeps between episodes (`grits_lab.runners.WorkerContext.reusable`):
+    built in the worker, never pickled, rebuilt only when `config` changes."""
+    from grits_lab.config import config_fingerprint
+
+    return context.reusable(config_fingerprint(config), lambda: ScoopEnv(config))

@@ -11,7 +11,7 @@ from grits_lab.data.jobs import run_collection
 from grits_lab.data.spillage import SpillageConfig, chunk_labels, expert_mean_trajectory
 from grits_lab.data.trajectories import shift_trajectory
 from grits_lab.runners import SerialExecutor
-from grits_lab.runners.work import WorkerContext, execute_spec, resolve_work_path
+from grits_lab.runners.work import WorkerContext, execute_spec
 from grits_lab.sim.shapes import BowlGeometry
 
 SMALL_CAMERAS = [
@@ -66,6 +66,7 @@ def _short_spillage_config(tmp_path, **overrides):
 def test_spillage_trial_clouds_have_n_points_where_the_objects_are(tmp_path):
     from grits_lab.data.jobs import base_trajectory
     from grits_lab.seeding import derive_seed, make_rng
+    from grits_lab.sim.env import worker_env
     from grits_lab.sim.foods import fill_count, primitive_food
     from grits_lab.data.spillage import _sim_config, make_trial_spec, source_bowl_region
 
@@ -73,9 +74,9 @@ def test_spillage_trial_clouds_have_n_points_where_the_objects_are(tmp_path):
     spec = make_trial_spec(config, _sim_config(config), base_trajectory(config), source_bowl_region(config), "sphere", 0)
     ctx = WorkerContext()
     try:
-        result = execute_spec(spec.replace(work=resolve_work_path(spec.work)), ctx)
+        result = execute_spec(spec, ctx)
         assert result.ok, result.traceback
-        env = ctx._env
+        env = worker_env(ctx, spec.params["trial"].sim)  # the worker's simulator, kept for the next spec
         bowl = env.source_bowl_pose()
     finally:
         ctx.close()

@@ -9,7 +9,7 @@ from grits_lab.data.spillage import SpillageConfig, _sim_config, expert_mean_tra
 from grits_lab.data.trajectories import append_exit, shift_trajectory
 from grits_lab.errors import ConfigError
 from grits_lab.geometry import rot6d_to_matrix
-from grits_lab.runners.work import WorkerContext, execute_spec, resolve_work_path
+from grits_lab.runners.work import WorkerContext, execute_spec
 from grits_lab.sim.shapes import BowlGeometry
 
 BOWL = BowlGeometry()
@@ -95,7 +95,7 @@ def _run_candidate(tilt_deg: float) -> dict:
     spec = make_trial_spec(config, _sim_config(config), expert_mean_trajectory(config), source_bowl_region(config), "sphere", 0)
     ctx = WorkerContext()
     try:
-        result = execute_spec(spec.replace(work=resolve_work_path(spec.work)), ctx)
+        result = execute_spec(spec, ctx)
     finally:
         ctx.close()
     assert result.ok, result.traceback

@@ -60,8 +60,8 @@ def _run(code, address, timeout=300):
 def test_executor_connects_through_address_and_runs_on_cluster_workers(ray_head):
     code = """
 import json, ray
-from grits_lab.runners import EpisodeSpec, ExecutorConfig, make_executor, SerialExecutor
-specs = [EpisodeSpec(f"e{i}", "probe", seed=i) for i in range(6)]
+from grits_lab.runners import EpisodeSpec, ExecutorConfig, make_executor, SerialExecutor, probe_episode
+specs = [EpisodeSpec(f"e{i}", probe_episode, seed=i) for i in range(6)]
 with make_executor(ExecutorConfig(address="ADDRESS")) as ex:
     n = ex.num_workers
     res = {r.episode_id: r.payload for r in ex.map_unordered(specs)}

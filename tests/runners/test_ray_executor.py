@@ -9,7 +9,7 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
-from grits_lab.runners import EpisodeSpec, SerialExecutor  # noqa: E402
+from grits_lab.runners import EpisodeSpec, SerialExecutor, probe_episode  # noqa: E402
 from grits_lab.runners.ray_executor import RayExecutor  # noqa: E402
 
 pytestmark = pytest.mark.ray
@@ -23,7 +23,7 @@ def ray_session():
 
 
 def _specs(n, **params):
-    return [EpisodeSpec(episode_id=f"ep{i:03d}", work="probe", seed=7 + i, params=dict(params)) for i in range(n)]
+    return [EpisodeSpec(episode_id=f"ep{i:03d}", work=probe_episode, seed=7 + i, params=dict(params)) for i in range(n)]
 
 
 def _records(results):
