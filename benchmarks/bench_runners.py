@@ -36,8 +36,8 @@ def main() -> None:
     import ray
 
     from grits_lab.config import config_from_dict
-    from grits_lab.data.jobs import base_trajectory, load_collect_config
-    from grits_lab.data.spillage import make_trial_spec, source_bowl_region
+    from grits_lab.collection.jobs import base_trajectory, load_collect_config
+    from grits_lab.collection.spillage_trials import make_trial_spec, source_bowl_region
     from grits_lab.runners import SerialExecutor
     from grits_lab.runners.ray_executor import RayExecutor
     from grits_lab.runners.work import WorkerContext, execute_spec

@@ -93,7 +93,7 @@ def lever_runs(args) -> dict:
     """Play the fixed set of shifted scoops under each lever; per lever: CPU time, spills, scoops."""
     import numpy as np
 
-    from grits_lab.data.spillage import SpillageConfig, _sim_config, expert_mean_trajectory, make_trial_spec, source_bowl_region
+    from grits_lab.collection.spillage_trials import SpillageConfig, _sim_config, expert_mean_trajectory, make_trial_spec, source_bowl_region
     from grits_lab.sim import ScoopEnv
     from grits_lab.sim.config import SimConfig
     from grits_lab.sim.foods import load_foods

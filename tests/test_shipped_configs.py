@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _loader(path: Path):
     from grits_lab.config import load_config, load_yaml
-    from grits_lab.data.jobs import load_collect_config
+    from grits_lab.collection.jobs import load_collect_config
     from grits_lab.evaluation.config import load_evaluation_config
     from grits_lab.pipeline.config import load_pipeline_config
     from grits_lab.policies.bc.training import load_bc_config

@@ -33,7 +33,7 @@ def register(subparsers: Any) -> None:
 
 
 def _collect(args: argparse.Namespace) -> int:
-    from grits_lab.data.jobs import load_collect_config, run_collection
+    from grits_lab.collection.jobs import load_collect_config, run_collection
 
     config = load_collect_config(args.config)
     if args.output:

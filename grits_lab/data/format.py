@@ -23,12 +23,12 @@ import numpy as np
 
 from grits_lab.errors import StorageError
 from grits_lab.io import save_npz_atomic, save_parquet_atomic
+from grits_lab.perception.composite import CLOUD_OBJECTS  # noqa: F401  (the order of stored cloud objects)
 
 FORMAT_VERSION = 1
 MANIFEST_FILE = "dataset.yaml"
 INDEX_FILE = "index.parquet"
 EPISODE_DIR = "episodes"
-CLOUD_OBJECTS = ("food", "spoon", "bowl")
 
 
 def episode_path(dataset_dir: str | Path, episode_id: str) -> Path:

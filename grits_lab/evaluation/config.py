@@ -15,6 +15,7 @@ from grits_lab.config import config_from_dict, load_yaml, merge_mappings, requir
 from grits_lab.sampling.guidance import PostHocConfig
 from grits_lab.errors import ConfigError
 from grits_lab.perception.composite import CloudConfig
+from grits_lab.policies.control import ScoopSettings
 from grits_lab.runners.config import ExecutorConfig
 
 # The paper's ten unseen test foods (SPEC "Foods"), as named in grits_lab/sim/foods.yaml.
@@ -56,25 +57,6 @@ class CheckpointPaths:
     bc: str | None = None  # behavior cloning (bc)
     demos: str | None = None  # demonstration dataset: SCONE's scoop prior (mean demonstration)
 
-
-@dataclass
-class ScoopSettings:
-    """The learned scoop: receding-horizon execution and when the scoop counts as complete."""
-
-    max_steps: int = 120  # actions (10 Hz) before the scoop is cut off (SCONE's probe included)
-    # A planned chunk that moves the spoon less than this (metres, every waypoint) ends the scoop:
-    # the policy holds its final pose, as demonstrations do after they finish.
-    still_tolerance: float = 0.004
-    min_steps: int = 24  # never stop before this many actions (the spoon starts still)
-    n_action_steps: int | None = None  # null: the policy's own (12 at the paper's settings)
-    settle_steps: int = 5  # actions holding the last pose before the scoop is judged
-
-    def __post_init__(self) -> None:
-        require(self.max_steps >= 1, "scoop.max_steps", self.max_steps, "at least 1")
-        require(self.still_tolerance > 0, "scoop.still_tolerance", self.still_tolerance, "positive")
-        require(self.min_steps >= 0, "scoop.min_steps", self.min_steps, "non-negative")
-        require(self.n_action_steps is None or self.n_action_steps >= 1, "scoop.n_action_steps", self.n_action_steps, "at least 1 or null")
-        require(self.settle_steps >= 0, "scoop.settle_steps", self.settle_steps, "non-negative")
 
 
 @dataclass

@@ -1,18 +1,8 @@
-"""Scoop controllers: what the episode loop asks for the next chunk of actions, and the learned methods' adapters.
+"""The learned methods' scoop controllers (dp, dp_post, the GRITS variants, bc) and the episode's observation history.
 
-The protocol (duck-typed, so the baselines in grits_lab/policies need not import this module):
-
-    controller.cloud_steps: int          newest steps whose composite cloud the controller reads
-    controller.stops_when_still: bool    (optional) a chunk that holds the pose ends the scoop
-    controller.n_action_steps: int       (optional) actions executed per chunk; default all
-    controller.reset(scene) -> None      once per episode, before the first plan
-    controller.plan(history, scene) -> Chunk | None
-                                         the next actions (k, 9) world frame; None ends the scoop
-
-`scene` (grits_lab/evaluation/scene.py) gives read access to the cameras and the spoon's
-sensors; `history` holds the measured spoon poses and clouds so far. The episode loop executes
-`n_action_steps` of each chunk and plans again (receding horizon), so a controller never steps
-the simulator itself.
+They follow the controller protocol of grits_lab/policies/control.py, as the baselines in
+grits_lab/policies do. `scene` (grits_lab/evaluation/scene.py) gives read access to the cameras
+and the spoon's sensors; `history` holds the measured spoon poses and clouds so far.
 """
 
 from __future__ import annotations
@@ -24,18 +14,10 @@ from typing import Any
 import numpy as np
 import torch
 
+from grits_lab.policies.control import Chunk, is_still
 from grits_lab.seeding import derive_seed
 
-
-@dataclass
-class Chunk:
-    actions: np.ndarray  # (k, 9) world-frame spoon poses
-    diagnostics: dict[str, Any] = field(default_factory=dict)
-    plan_time_s: float = 0.0
-    # (k, 9) the unguided sample's chunk from the same noise, when the sampler made one: what the
-    # policy itself proposes, on which "the policy holds" is judged (guidance refines a motion;
-    # it is not the policy asking to move on).
-    unguided_actions: np.ndarray | None = None
+__all__ = ["BCController", "Chunk", "DiffusionController", "LearnedController", "ObsHistory", "is_still"]
 
 
 class ObsHistory:
@@ -76,10 +58,6 @@ class ObsHistory:
             earlier = [s for s in steps if s <= i]
             out.append(store[earlier[-1] if earlier else steps[0]])
         return np.stack(out)
-
-
-def _still(actions: np.ndarray, pose: np.ndarray, tolerance: float) -> bool:
-    return bool(np.all(np.linalg.norm(actions[:, :3] - pose[None, :3], axis=1) < tolerance))
 
 
 class LearnedController:
@@ -192,9 +170,3 @@ class BCController(LearnedController):
         start = time.perf_counter()
         actions = self.policy.predict_action(self.observation(history))
         return Chunk(actions, {}, time.perf_counter() - start)
-
-
-def is_still(chunk: Chunk, pose: np.ndarray, tolerance: float) -> bool:
-    """True when every action of the policy's own proposal (the unguided chunk from the same noise
-    when there is one, else the chunk) keeps the spoon within `tolerance` of `pose`: the policy holds."""
-    return _still(chunk.actions if chunk.unguided_actions is None else chunk.unguided_actions, pose, tolerance)

@@ -13,49 +13,23 @@ core, which is why this is off unless asked for.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from grits_lab.config import require
-from grits_lab.evaluation.config import ScoopSettings
-from grits_lab.perception.composite import CloudConfig
-from grits_lab.seeding import derive_seed
-
-
-@dataclass
-class RolloutSettings:
-    """Scoops played during training (`every` steps; 0 = never)."""
-
-    every: int = 0
-    episodes: int = 6
-    scoop: ScoopSettings = field(default_factory=ScoopSettings)
-    cloud: CloudConfig = field(default_factory=lambda: CloudConfig(n_points=256, cad_surface_samples=4000))
-    sim: dict[str, Any] = field(default_factory=dict)  # grits_lab.sim.SimConfig keys
-
-    def __post_init__(self) -> None:
-        require(self.every >= 0, "rollout.every", self.every, "non-negative (0 = never)")
-        require(self.episodes >= 1, "rollout.episodes", self.episodes, "at least 1")
-
-
-def rollout_episodes(pairs: list[tuple[str, str]], n: int, seed: int) -> list[tuple[str, str, int]]:
-    """(food, level, seed) of the `n` scoops: the (food, level) pairs in turn, seeds derived from `seed`."""
-    ordered = sorted(set(pairs))
-    return [(*ordered[i % len(ordered)], derive_seed(seed, "rollout", i)) for i in range(n)]
+from grits_lab.policies.control import RolloutSettings
 
 
 class ScoopRollouts:
-    """A simulator and cloud builder kept for the whole run; `__call__(policy)` plays the scoops."""
+    """`grits_lab.policies.control.Rollouts` in the simulator: a simulator and cloud builder kept for the whole run; `__call__(policy)` plays the scoops."""
 
     def __init__(self, settings: RolloutSettings, episodes: list[tuple[str, str, int]]) -> None:
-        from grits_lab.config import config_from_dict
         from grits_lab.perception.scene import builder_for_env
-        from grits_lab.sim import ScoopEnv, SimConfig
+        from grits_lab.sim import ScoopEnv
 
         self.settings = settings
         self.episodes = episodes
-        self.env = ScoopEnv(config_from_dict(SimConfig, settings.sim, "rollout.sim"))
+        self.env = ScoopEnv(settings.sim)
         self.builder = builder_for_env(settings.cloud, self.env)
 
     def __call__(self, policy: Any) -> dict[str, float]:

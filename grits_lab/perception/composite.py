@@ -16,10 +16,11 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 
 from grits_lab.config import require
-from grits_lab.data.format import CLOUD_OBJECTS
 from grits_lab.perception.clouds import farthest_point_sample, object_points, transform_points
 from grits_lab.perception.noise import DepthNoiseConfig, corrupt_depth
 from grits_lab.seeding import derive_seed, make_rng
+
+CLOUD_OBJECTS = ("food", "spoon", "bowl")  # the object order of every (3, N, 3) cloud, stored and modelled
 
 
 @dataclass

@@ -136,15 +136,16 @@ def run(stage: str, config_path: Path, layout: Layout, progress: bool) -> dict[s
 
 
 def _run_collect(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
-    from grits_lab.data.jobs import load_collect_config, run_collection
+    from grits_lab.collection.jobs import load_collect_config, run_collection
 
     return run_collection(load_collect_config(path), progress=progress)
 
 
 def _run_policy(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
+    from grits_lab.evaluation.rollouts import ScoopRollouts
     from grits_lab.policies.diffusion.training import load_train_config, train_policy
 
-    return train_policy(load_train_config(path), progress=progress)
+    return train_policy(load_train_config(path), progress=progress, rollouts=ScoopRollouts)
 
 
 def _run_bc(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:

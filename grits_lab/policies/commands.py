@@ -35,6 +35,11 @@ def _train(args: argparse.Namespace) -> int:
     _, _, module_name, loader, trainer = TRAINERS[args.trainer]
     module = importlib.import_module(module_name)
     config = getattr(module, loader)(args.config)
-    summary = getattr(module, trainer)(config, max_steps=args.max_steps, progress=not args.no_progress, fresh=args.fresh)
+    extra = {}
+    if args.trainer == "policy":  # scoops during training are played in the simulator, from above the policy layer
+        from grits_lab.evaluation.rollouts import ScoopRollouts
+
+        extra["rollouts"] = ScoopRollouts
+    summary = getattr(module, trainer)(config, max_steps=args.max_steps, progress=not args.no_progress, fresh=args.fresh, **extra)
     print(to_json(summary))
     return 0

@@ -22,8 +22,9 @@ from torch import nn
 from tqdm import tqdm
 
 from grits_lab.config import config_fingerprint, config_to_dict, require
-from grits_lab.errors import StorageError
+from grits_lab.errors import ConfigError, StorageError
 from grits_lab.io import ensure_writable_dir, write_text_atomic
+from grits_lab.policies.control import RolloutSettings, RolloutsFactory, rollout_episodes
 from grits_lab.policies.diffusion.dataset import DemoWindowDataset, dataset_fingerprint, list_demo_episodes, split_episodes
 from grits_lab.training import (
     EMA, MetricLogger, load_checkpoint, require_finite_loss, resolve_device, save_checkpoint, set_torch_threads,
@@ -95,7 +96,8 @@ def train_on_demonstrations(
     make_policy: Callable[[], nn.Module],
     *,
     desc: str,
-    rollout: Any = None,
+    rollout: RolloutSettings | None = None,
+    rollouts: RolloutsFactory | None = None,
     max_steps: int | None = None,
     progress: bool = True,
     fresh: bool = False,
@@ -103,10 +105,16 @@ def train_on_demonstrations(
     """Train (or resume) `make_policy()` on `config.dataset` and return a summary.
 
     The policy needs `fit_normalizers`, `compute_loss(batch, generator)`, `policy_state()`,
-    `load_state_dict` and `load_normalizer_state`. `rollout` (grits_lab.evaluation.rollouts.
-    RolloutSettings, diffusion policies only) plays scoops every `rollout.every` steps. `max_steps`
+    `load_state_dict` and `load_normalizer_state`. With `rollout.every` > 0 (diffusion policies only),
+    `rollouts(rollout, episodes)` builds the player of the training scoops (the simulator's is
+    grits_lab.evaluation.rollouts.ScoopRollouts, handed in by the caller above this layer) and
+    they are played every `rollout.every` steps. Raises ConfigError when rollouts are asked for
+    and no player was handed in. `max_steps`
     stops the run early; the LR schedule still spans the config's `max_steps`.
     """
+    if rollout is not None and rollout.every and rollouts is None:
+        raise ConfigError("`rollout.every` asks for scoops during training, but no rollout player was handed to the "
+                          "training loop (train through `grits-lab train policy` or the pipeline, which hand in the simulator's)")
     set_torch_threads(config.num_threads)
     device = resolve_device(config.device)
     total_steps = min(max_steps or config.max_steps, config.max_steps)
@@ -167,14 +175,13 @@ def train_on_demonstrations(
         if config.keep_every and step % config.keep_every == 0:
             save_checkpoint(ckpt_dir / f"step_{step}.pt", state)
 
-    rollouts = None
+    player = None
     if rollout is not None and rollout.every:
         from grits_lab.data.format import load_index
-        from grits_lab.evaluation.rollouts import ScoopRollouts, rollout_episodes
 
         train_set_ids = set(train_ids)
         pairs = [(r.food, r.level) for r in load_index(config.dataset).itertuples() if r.episode_id in train_set_ids]
-        rollouts = ScoopRollouts(rollout, rollout_episodes(pairs, rollout.episodes, config.seed))
+        player = rollouts(rollout, rollout_episodes(pairs, rollout.episodes, config.seed))  # type: ignore[misc]
     logger = MetricLogger(out, resume_step=step)
     first_loss = last_loss = float("nan")
     window: list[float] = []
@@ -203,8 +210,8 @@ def train_on_demonstrations(
                 values = {"train_loss": last_loss, "lr": scheduler.get_last_lr()[0], "steps_per_s": rate}
                 if val_set is not None and (step % config.val_every == 0 or step == total_steps):
                     values["val_loss"] = validation_loss(evaluated, val_set, config.val_batches, config.batch_size, config.seed, device)
-                if rollouts is not None and (step % rollout.every == 0 or step == total_steps):
-                    values.update(rollouts(evaluated))
+                if player is not None and (step % rollout.every == 0 or step == total_steps):  # type: ignore[union-attr]
+                    values.update(player(evaluated))
                 logger.log(step, values)
                 bar.set_postfix({k: f"{v:.4g}" for k, v in values.items() if k != "lr"})
                 window = []
@@ -213,8 +220,8 @@ def train_on_demonstrations(
     finally:
         bar.close()
         logger.close()
-        if rollouts is not None:
-            rollouts.close()
+        if player is not None:
+            player.close()
     return {
         "output_dir": str(out),
         "checkpoint": str(last_path),

@@ -1,7 +1,7 @@
 """Point-cloud encoders of the predictor: DP3 (the paper's) and PointNet++ (its ablation), plain PyTorch.
 
 Both take a normalized composite cloud `(B, K, N, 3)` with the K = 3 objects in the order of
-`grits_lab.data.format.CLOUD_OBJECTS` (food, spoon, bowl) and return one embedding `(B, D)`.
+`grits_lab.perception.composite.CLOUD_OBJECTS` (food, spoon, bowl) and return one embedding `(B, D)`.
 Both are invariant to the order of the points within each object: DP3 by construction (a shared
 per-point MLP and a max-pool); PointNet++ as far as farthest-point sampling allows (its first
 centroid is the first point, so a permutation changes which centroids are drawn but not the

@@ -19,7 +19,7 @@ from grits_lab.errors import InputError, StorageError
 from grits_lab.spillage.config import PredictorModelConfig
 from grits_lab.spillage.encoders import DP3Encoder, PointNet2Encoder
 
-N_OBJECTS = 3  # len(grits_lab.data.format.CLOUD_OBJECTS)
+N_OBJECTS = 3  # len(grits_lab.perception.composite.CLOUD_OBJECTS)
 BOWL = 2  # index of the source bowl in CLOUD_OBJECTS
 
 

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from grits_lab.config import config_from_dict
-from grits_lab.data.collect import DatasetWriter
-from grits_lab.data.demos import DemosConfig, plan_demos
+from grits_lab.collection.driver import DatasetWriter
+from grits_lab.collection.demos import DemosConfig, plan_demos
 from grits_lab.data.format import list_episode_files, load_index, read_episode
-from grits_lab.data.jobs import run_collection
-from grits_lab.data.spillage import SpillageConfig, chunk_labels, expert_mean_trajectory
+from grits_lab.collection.jobs import run_collection
+from grits_lab.collection.spillage_trials import SpillageConfig, chunk_labels, expert_mean_trajectory
 from grits_lab.data.trajectories import shift_trajectory
 from grits_lab.runners import SerialExecutor
 from grits_lab.runners.work import WorkerContext, execute_spec
@@ -64,11 +64,11 @@ def _short_spillage_config(tmp_path, **overrides):
 
 
 def test_spillage_trial_clouds_have_n_points_where_the_objects_are(tmp_path):
-    from grits_lab.data.jobs import base_trajectory
+    from grits_lab.collection.jobs import base_trajectory
     from grits_lab.seeding import derive_seed, make_rng
     from grits_lab.sim.env import worker_env
     from grits_lab.sim.foods import fill_count, primitive_food
-    from grits_lab.data.spillage import _sim_config, make_trial_spec, source_bowl_region
+    from grits_lab.collection.spillage_trials import _sim_config, make_trial_spec, source_bowl_region
 
     config = _short_spillage_config(tmp_path)
     spec = make_trial_spec(config, _sim_config(config), base_trajectory(config), source_bowl_region(config), "sphere", 0)

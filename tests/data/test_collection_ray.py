@@ -10,8 +10,8 @@ ray = pytest.importorskip("ray")
 
 from grits_lab.config import config_from_dict  # noqa: E402
 from grits_lab.data.format import list_episode_files, read_episode  # noqa: E402
-from grits_lab.data.jobs import base_trajectory, run_collection  # noqa: E402
-from grits_lab.data.spillage import SpillageConfig, _sim_config, make_trial_spec, source_bowl_region  # noqa: E402
+from grits_lab.collection.jobs import base_trajectory, run_collection  # noqa: E402
+from grits_lab.collection.spillage_trials import SpillageConfig, _sim_config, make_trial_spec, source_bowl_region  # noqa: E402
 from grits_lab.runners import SerialExecutor  # noqa: E402
 from grits_lab.runners.ray_executor import RayExecutor  # noqa: E402
 

@@ -29,7 +29,7 @@ def test_dataset_info_on_a_non_dataset(tmp_path, capsys):
 
 
 def test_output_made_by_another_config_is_refused(tmp_path, capsys):
-    from grits_lab.data.collect import DatasetWriter
+    from grits_lab.collection.driver import DatasetWriter
 
     DatasetWriter(tmp_path / "d", "spillage", {"seed": 0})
     path = tmp_path / "c.yaml"

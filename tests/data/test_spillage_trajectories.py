@@ -5,7 +5,7 @@ import pytest
 
 from grits_lab.config import config_from_dict
 
-from grits_lab.data.spillage import SpillageConfig, _sim_config, expert_mean_trajectory, make_trial_spec, source_bowl_region
+from grits_lab.collection.spillage_trials import SpillageConfig, _sim_config, expert_mean_trajectory, make_trial_spec, source_bowl_region
 from grits_lab.data.trajectories import append_exit, shift_trajectory
 from grits_lab.errors import ConfigError
 from grits_lab.geometry import rot6d_to_matrix

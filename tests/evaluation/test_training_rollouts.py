@@ -7,7 +7,8 @@ import torch
 
 from eval_helpers import N_POINTS
 from grits_lab.config import config_from_dict
-from grits_lab.evaluation.rollouts import RolloutSettings, ScoopRollouts, rollout_episodes
+from grits_lab.evaluation.rollouts import ScoopRollouts
+from grits_lab.policies.control import RolloutSettings, rollout_episodes
 from grits_lab.policies.diffusion import DiffusionPolicy
 from grits_lab.policies.diffusion.training import PolicyTrainConfig, train_policy
 
@@ -26,7 +27,7 @@ def test_training_logs_scoop_rates_from_the_sim_and_they_repeat_for_the_same_wei
                    "obs_encoder": {"kind": "pointcloud", "points_per_object": 16, "point_hidden": [16], "feature_dim": 8},
                    "unet": {"down_dims": [16, 32], "kernel_size": 3, "n_groups": 4, "diffusion_step_embed_dim": 16}},
     })
-    summary = train_policy(config, progress=False)
+    summary = train_policy(config, progress=False, rollouts=ScoopRollouts)
     log = pd.read_csv(tmp_path / "dp" / "metrics.csv")
     assert list(log["step"]) == [10, 20]
     assert log["rollout_scoop_success"].between(0, 1).all() and log["rollout_spillage"].between(0, 1).all()
@@ -42,3 +43,15 @@ def test_training_logs_scoop_rates_from_the_sim_and_they_repeat_for_the_same_wei
         rollouts.close()
     assert first == second and policy.training  # same weights, same scenes, same noise: same rates; mode restored
     assert first == log.iloc[-1][["rollout_scoop_success", "rollout_spillage"]].to_dict()
+
+
+def test_rollouts_asked_for_without_a_player_fail_before_training(tmp_path):
+    import pytest
+
+    from grits_lab.errors import ConfigError
+
+    config = config_from_dict(PolicyTrainConfig, {"dataset": str(tmp_path / "none"), "output_dir": str(tmp_path / "dp"),
+                                                  "log_every": 10, "rollout": ROLLOUT})
+    with pytest.raises(ConfigError, match="no rollout player"):
+        train_policy(config, progress=False)
+    assert not (tmp_path / "dp").exists()

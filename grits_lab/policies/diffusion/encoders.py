@@ -118,7 +118,7 @@ class RGBDEncoder(nn.Module):
 def rgbd_to_unit(rgbd: torch.Tensor, depth_max: float) -> torch.Tensor:
     """(..., 4, H, W) stored RGB-D -> float in [0, 1]: RGB as is, depth clipped to depth_max and scaled.
 
-    Float input follows the demonstration format (grits_lab/data/demos.py): RGB in [0, 1], depth
+    Float input follows the demonstration format (grits_lab/collection/demos.py): RGB in [0, 1], depth
     in metres. uint8 input is read as four 0-255 channels (depth already quantized over [0, depth_max]).
     """
     if rgbd.dtype == torch.uint8:

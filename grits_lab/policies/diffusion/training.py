@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from grits_lab.config import load_config, require
-from grits_lab.evaluation.rollouts import RolloutSettings
+from grits_lab.policies.control import RolloutSettings, RolloutsFactory
 from grits_lab.policies.demo_training import DemoTrainConfig, train_on_demonstrations
 from grits_lab.policies.diffusion.configuration_diffusion import DiffusionPolicyConfig
 from grits_lab.policies.diffusion.modeling_diffusion import DiffusionPolicy
@@ -26,7 +26,7 @@ class PolicyTrainConfig(DemoTrainConfig):
 
     policy: DiffusionPolicyConfig = field(default_factory=DiffusionPolicyConfig)
     # Every `rollout.every` steps (0 = never) play `rollout.episodes` scoops in the simulator with
-    # the EMA weights and log rollout_scoop_success / rollout_spillage (grits_lab/evaluation/rollouts.py).
+    # the EMA weights and log rollout_scoop_success / rollout_spillage (played by the caller's `rollouts`, e.g. grits_lab/evaluation/rollouts.py).
     rollout: RolloutSettings = field(default_factory=RolloutSettings)
 
     def __post_init__(self) -> None:
@@ -39,11 +39,13 @@ def load_train_config(path: str | Path) -> PolicyTrainConfig:
     return load_config(path, PolicyTrainConfig)
 
 
-def train_policy(config: PolicyTrainConfig, max_steps: int | None = None, progress: bool = True, fresh: bool = False) -> dict[str, Any]:
+def train_policy(config: PolicyTrainConfig, max_steps: int | None = None, progress: bool = True, fresh: bool = False,
+                 rollouts: RolloutsFactory | None = None) -> dict[str, Any]:
     """Train (or resume) the diffusion policy and return a summary.
 
     `max_steps` stops the run early (the LR schedule still spans the config's `max_steps`, so a
-    run stopped and resumed ends where an uninterrupted one does).
+    run stopped and resumed ends where an uninterrupted one does). `rollouts` plays the training
+    scoops when `config.rollout.every` > 0 (grits_lab.evaluation.rollouts.ScoopRollouts).
     """
-    return train_on_demonstrations(config, lambda: DiffusionPolicy(config.policy), desc="train policy", rollout=config.rollout,
+    return train_on_demonstrations(config, lambda: DiffusionPolicy(config.policy), desc="train policy", rollout=config.rollout, rollouts=rollouts,
                                    max_steps=max_steps, progress=progress, fresh=fresh)

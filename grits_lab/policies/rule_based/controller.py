@@ -58,7 +58,7 @@ class RuleBasedController:
         self.measured = {}
 
     def plan(self, history: Any, scene: Any) -> Any:
-        from grits_lab.evaluation.controllers import Chunk
+        from grits_lab.policies.control import Chunk
 
         if self.done:
             return None

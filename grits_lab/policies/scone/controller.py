@@ -83,7 +83,7 @@ class SconeController:
         return pitch_pose(np.array([bowl[0], bowl[1], z + half * math.sin(pitch)]), pitch)
 
     def plan(self, history: Any, scene: Any) -> Any:
-        from grits_lab.evaluation.controllers import Chunk
+        from grits_lab.policies.control import Chunk
 
         s = self.settings
         geometry = scene.source_geometry()

@@ -13,8 +13,8 @@ from grits_lab.errors import ConfigError, InputError
 
 def load_collect_config(path: str | Path) -> Any:
     """DemosConfig or SpillageConfig, chosen by the file's `kind:` key."""
-    from grits_lab.data.demos import DemosConfig
-    from grits_lab.data.spillage import SpillageConfig
+    from grits_lab.collection.demos import DemosConfig
+    from grits_lab.collection.spillage_trials import SpillageConfig
 
     data = load_yaml(path)
     kinds = {"demos": DemosConfig, "spillage": SpillageConfig}
@@ -33,19 +33,19 @@ def run_collection(config: Any, progress: bool = True) -> dict[str, Any]:
     Everything that can be checked is checked before the dataset directory is touched: the
     episode plan (names of foods and levels), an existing dataset's config, and the Ray cluster.
     """
-    from grits_lab.data.collect import DatasetWriter, existing_manifest, run_fixed_job
+    from grits_lab.collection.driver import DatasetWriter, existing_manifest, run_fixed_job
     from grits_lab.runners.config import check_reachable, cluster_address, make_executor
 
     existing_manifest(config.output, config.kind, config.identity())
     if config.kind == "demos":
-        from grits_lab.data.demos import plan_demos
+        from grits_lab.collection.demos import plan_demos
 
         specs = plan_demos(config)
         check_reachable(cluster_address(config.executor))
         writer = DatasetWriter(config.output, config.kind, config.identity())
         with make_executor(config.executor) as executor:
             return run_fixed_job(executor, writer, specs, desc="demos", spilled_of=lambda m: m.get("spilled_any"), progress=progress)
-    from grits_lab.data.spillage import BASE_TRAJECTORY_FILE, run_spillage_job, source_bowl_region
+    from grits_lab.collection.spillage_trials import BASE_TRAJECTORY_FILE, run_spillage_job, source_bowl_region
 
     check_reachable(cluster_address(config.executor))
     writer = DatasetWriter(config.output, config.kind, config.identity())
@@ -69,7 +69,7 @@ def base_trajectory(config: Any) -> np.ndarray:
 
     src = config.base_trajectory
     if src is None:
-        from grits_lab.data.spillage import expert_mean_trajectory
+        from grits_lab.collection.spillage_trials import expert_mean_trajectory
 
         return expert_mean_trajectory(config)
     path = Path(src)

@@ -249,7 +249,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
     """Generate candidates until every (shape, label) bucket is full; write accepted trials."""
     from grits_lab.config import config_from_dict
     from grits_lab.data.balance import BalancedAcceptor
-    from grits_lab.data.collect import Progress, failure_record
+    from grits_lab.collection.driver import Progress, failure_record
     from grits_lab.sim.config import SimConfig
 
     sim = config_from_dict(SimConfig, config.sim, "sim")
