@@ -80,7 +80,7 @@ def _replay(args: argparse.Namespace) -> int:
     import json
 
     from grits_lab.errors import InputError
-    from grits_lab.evaluation.replay import replay_episode
+    from grits_lab.report.replay import replay_episode
     from grits_lab.sim.video import check_video_path
 
     if args.video is not None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import platform
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Iterable
 
@@ -212,7 +212,7 @@ def _load_existing(path: Path) -> list[dict[str, Any]]:
 
 
 def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], digests: dict[str, str], n_episodes: int) -> dict[str, Any]:
-    from grits_lab.report.provenance import git_commit, package_versions
+    from grits_lab.versions import git_commit, package_versions
 
     return {
         "run_id": config.run_id,
@@ -271,27 +271,20 @@ def evaluate(config: EvaluationConfig, *, progress: bool = True, fresh: bool = F
     return pd.read_parquet(records_path) if records_path.exists() else records_frame([])
 
 
-def evaluate_guidance(config_path: str | Path, episodes: list[dict[str, Any]], guidance: dict[str, Any], method: str = "grits",
+def evaluate_guidance(config: EvaluationConfig, keys: list[EpisodeKey], rho: float, s: int, method: str = "grits",
                       run_id: str = "sweep", executor: Executor | None = None, progress: bool = False) -> pd.DataFrame:
-    """The sweep's entry point: `method` with guidance {rho, s} on the given episodes -> their records.
+    """The sweep's entry point: `method` of `config` with guidance rho, s (Algorithm 1) on `keys` -> their records.
 
-    episodes: dicts with food, level, trial, seed (the sweep derives its own seeds from its own
-    root, so no tuning episode is a test episode). Nothing is written to disk: the sweep stores
-    the returned records itself.
+    config: a loaded evaluation config; only its guidance's rho and s and the run id change, so
+        every other guidance setting (gradient, step, clipping) is the evaluation's.
+    keys: the episodes, with their own seeds (the sweep derives them from its own root, so no
+        tuning episode is a test episode). Returns one record per episode (grits_lab/records.py
+        columns). Nothing is written to disk: the sweep stores the returned records itself.
+    Raises InputError for an unknown method.
     """
-    config = load_evaluation_config(config_path, {"guidance": dict(guidance), "run_id": run_id})
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; methods: {', '.join(METHODS)}")
-    from grits_lab.sim import SimConfig
-    from grits_lab.sim.foods import load_foods
-
-    library = load_foods(config_from_dict(SimConfig, config.sim, "sim").foods_file)
-    keys = []
-    for e in episodes:
-        food = library.get(str(e["food"]))
-        if str(e["level"]) not in food.levels:
-            raise InputError(f"food {e['food']!r} has no level {e['level']!r}")
-        keys.append(EpisodeKey(str(e["food"]), str(e["level"]), int(e["trial"]), int(e["seed"]), food.split))
+    config = replace(config, run_id=run_id, guidance=replace(config.guidance, rho=float(rho), s=int(s)))
     specs = build_specs(config, keys, methods=[method])
     own = executor is None
     executor = executor or make_executor(config.executor)
@@ -309,7 +302,7 @@ def evaluate_file(path: str | Path, overrides: dict[str, Any] | None = None, **k
 
 def summary_table(records: pd.DataFrame) -> str:
     """Per method: episodes, errors, and rates with Wilson 95% intervals (the report layer's statistics)."""
-    from grits_lab.report.stats import wilson_interval
+    from grits_lab.intervals import wilson_interval
 
     if records.empty:
         return "no episodes"

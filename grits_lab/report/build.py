@@ -70,7 +70,7 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, vide
 
     videos: replay up to this many episodes per food (grits_lab/report/videos.py has the rule)
     under Diffusion Policy and GRITS and show them side by side; `replay` is the function that
-    replays one recorded episode into a video (`grits_lab.evaluation.replay.replay_episode`).
+    replays one recorded episode into a video (`grits_lab.report.replay.replay_episode`).
     With videos = 0 (the default) nothing is replayed and no simulator is needed.
     """
     out = Path(out_dir) if out_dir is not None else default_out_dir(run_dir)

@@ -33,7 +33,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.videos < 0:
         raise InputError(f"--videos must be 0 or more. Got {args.videos}.")
     if args.videos:
-        from grits_lab.evaluation.replay import replay_episode
+        from grits_lab.report.replay import replay_episode
 
         run_dir = Path(args.run_dir)
         missing = [name for name in ("episodes.parquet", "config.yaml") if not (run_dir / name).is_file()]

@@ -8,43 +8,13 @@ no heavy package is imported), seeds and episode counts taken from the records t
 from __future__ import annotations
 
 import datetime as _dt
-import platform
-import subprocess
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
 from grits_lab.report.loading import RunData
-
-PACKAGES = ("grits-lab", "numpy", "pandas", "pyarrow", "matplotlib", "jinja2", "torch", "pybullet", "ray", "optuna", "open3d-cpu", "open3d")
-
-
-def git_commit(where: Path | None = None) -> str:
-    """`<sha>` or `<sha> (with uncommitted changes)` for the checkout holding grits_lab; `unknown` outside git."""
-    where = where or Path(__file__).resolve().parents[2]
-    try:
-        sha = subprocess.run(["git", "-C", str(where), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10)
-        if sha.returncode != 0:
-            return "unknown (not a git checkout)"
-        dirty = subprocess.run(["git", "-C", str(where), "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, timeout=10)
-    except (OSError, subprocess.TimeoutExpired):
-        return "unknown (git not available)"
-    suffix = " (with uncommitted changes)" if dirty.stdout.strip() else ""
-    return sha.stdout.strip() + suffix
-
-
-def package_versions() -> dict[str, str]:
-    versions = {"python": platform.python_version()}
-    for name in PACKAGES:
-        try:
-            versions[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            continue
-    return versions
-
+from grits_lab.versions import git_commit, package_versions
 
 def seed_summary(episodes: pd.DataFrame | None) -> dict[str, Any]:
     """Distinct seeds, their range, and whether every method saw the same (food, level, trial) -> seed map."""

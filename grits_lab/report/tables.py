@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import pandas as pd
 
 from grits_lab.records import OUTCOME_COLUMNS
-from grits_lab.report.stats import Rate, format_percent, format_rate, rate
+from grits_lab.intervals import Rate, format_percent, format_rate, rate
 from grits_lab.report.vocabulary import (
     ABLATION_METHODS,
     FOOD_ABBREVIATIONS,

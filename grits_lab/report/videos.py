@@ -13,7 +13,7 @@ each is replayed under both methods, shown side by side. A food recorded for onl
 methods takes that method's episodes, spilled first. Errored episodes are never chosen.
 
 Replaying needs the simulator and the checkpoints; the report hands that work in as a callable
-(`replay`, `grits_lab.evaluation.replay.replay_episode` from the command), so this module and a
+(`replay`, `grits_lab.report.replay.replay_episode` from the command), so this module and a
 plain `grits-lab report` need neither.
 """
 

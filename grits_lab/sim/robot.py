@@ -17,6 +17,7 @@ import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
 
 from grits_lab.geometry import matrix_to_quat, quat_to_matrix
+from grits_lab.sim.bullet import connect_direct
 from grits_lab.sim.shapes import SpoonGeometry
 
 PANDA_URDF = "franka_panda/panda.urdf"
@@ -59,8 +60,6 @@ class PandaKinematics:
     """IK and forward kinematics of the Panda's grasp frame, on its own DIRECT client."""
 
     def __init__(self, base_position: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
-        from grits_lab.sim.world import connect_direct
-
         self.client = connect_direct()
         self.client.setAdditionalSearchPath(pybullet_data.getDataPath())
         self.robot = self.client.loadURDF(PANDA_URDF, base_position, useFixedBase=True)

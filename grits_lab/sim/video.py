@@ -1,7 +1,7 @@
 """Episode videos: a camera that frames the spoon and both bowls, captioned frames, and the writers (imageio).
 
 Rendering costs tens of milliseconds per frame, so nothing here runs during evaluation: videos
-are made while replaying an episode from its record (grits_lab/evaluation/replay.py) or when a
+are made while replaying an episode from its record (grits_lab/report/replay.py) or when a
 rollout is asked for one (`grits-lab rollout --video`).
 """
 

@@ -9,8 +9,6 @@ packed in layers inside the source bowl and left to settle before the episode st
 from __future__ import annotations
 
 import math
-import os
-import sys
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,6 +16,7 @@ import pybullet as pb
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
 
+from grits_lab.sim.bullet import connect_direct
 from grits_lab.sim.config import SimConfig
 from grits_lab.sim.foods import SampledParticles
 from grits_lab.sim.robot import (
@@ -37,20 +36,6 @@ TABLE_CENTER = (0.45, 0.0, -0.02)
 BOWL_COLOR = (0.92, 0.92, 0.88, 1.0)
 TARGET_COLOR = (0.55, 0.75, 0.95, 1.0)
 SPOON_COLOR = (0.75, 0.76, 0.8, 1.0)
-
-
-def connect_direct() -> BulletClient:
-    """A new DIRECT client. PyBullet prints "argv[0]=" on C-level stdout when connecting; keep
-    stdout clean (commands print exactly one JSON object) by pointing fd 1 elsewhere meanwhile."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    try:
-        with open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), 1)
-            return BulletClient(connection_mode=pb.DIRECT)
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
 
 
 @dataclass

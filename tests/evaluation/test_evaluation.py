@@ -103,14 +103,12 @@ def test_resume_skips_finished_episodes_and_gives_the_same_table(models, tmp_pat
 
 
 def test_sweep_entry_point_evaluates_the_given_episodes_with_the_given_guidance(models, tmp_path):
-    import yaml
+    from grits_lab.evaluation.run import EpisodeKey
 
-    from grits_lab.config import config_to_dict
-
-    path = tmp_path / "eval.yaml"
-    path.write_text(yaml.safe_dump(config_to_dict(eval_config(models, tmp_path / "run"))))
-    episodes = [{"food": "chocolate_balls", "level": "low", "trial": 0, "seed": 11}]
-    records = evaluate_guidance(path, episodes, {"rho": 1.0, "s": 12}, method="grits", run_id="trial-7")
+    config = eval_config(models, tmp_path / "run")
+    keys = [EpisodeKey("chocolate_balls", "low", 0, 11, "train")]
+    records = evaluate_guidance(config, keys, rho=1.0, s=12, method="grits", run_id="trial-7")
+    assert not (tmp_path / "run").exists()  # the sweep stores the records itself
     row = records.iloc[0]
     assert (row["seed"], row["rho"], row["s"], row["run_id"], row["method"]) == (11, 1.0, 12, "trial-7", "grits")
     assert row["guided_steps"] == 3 * row["n_plans"]  # t = 0, 6, 12 are guided with s = 12

@@ -11,7 +11,7 @@ from functools import partial
 
 import pytest
 
-from grits_lab.evaluation.replay import replay_episode
+from grits_lab.report.replay import replay_episode
 from grits_lab.report import build_report
 from grits_lab.sim.config import CameraConfig
 

@@ -10,7 +10,8 @@ import pybullet as pb
 import pytest
 
 from grits_lab.sim.shapes import TARGET_BOWL, BowlGeometry, SpoonGeometry, bowl_boxes, boxes_to_mesh, spoon_boxes
-from grits_lab.sim.world import MAX_SHAPES_PER_LINK, _compound, connect_direct, create_static_boxes
+from grits_lab.sim.bullet import connect_direct
+from grits_lab.sim.world import MAX_SHAPES_PER_LINK, _compound, create_static_boxes
 
 ASSETS = Path(__file__).resolve().parents[2] / "assets"
 

@@ -10,7 +10,6 @@ from sweep_helpers import free_port
 
 from grits_lab.cli import main
 from grits_lab.errors import StorageError
-from grits_lab.tune import grits_binding
 from grits_lab.tune.storage import open_storage
 
 
@@ -55,13 +54,13 @@ def test_grits_evaluator_needs_its_config_and_checkpoints(sweep_file, tmp_path, 
     assert not (tmp_path / "results").exists()  # failed before any storage was created
 
 
-def test_missing_evaluation_layer_is_one_clear_line(sweep_file, tmp_path, capsys, monkeypatch):
-    (tmp_path / "eval.yaml").write_text("{}\n")
-    monkeypatch.setattr(grits_binding, "EVALUATION_MODULE", "grits_lab.evaluation_not_installed")
+def test_a_misspelled_key_in_the_evaluation_config_stops_the_sweep_before_any_trial(sweep_file, tmp_path, capsys):
+    (tmp_path / "eval.yaml").write_text("guidance: {rho: 1.0, treshold: 12}\n")
     config = sweep_file(evaluator="grits", evaluation={"config": str(tmp_path / "eval.yaml")})
     assert main(["sweep", str(config)]) == 2
     line = one_error_line(capsys)
-    assert "needs the evaluation layer" in line and "evaluator: synthetic" in line
+    assert "eval.yaml" in line and "guidance.treshold" in line
+    assert not (tmp_path / "results").exists()
 
 
 def test_full_run_then_report_only(sweep_file, tmp_path, capsys):

@@ -1,0 +1,110 @@
+"""The package's layering: every import in grits_lab points down, and none goes through a string.
+
+Read from the source (every `import` statement, module level or inside a function), so the rule
+holds for the lazy imports the CLI's handlers make too. A package may import itself and any
+package of a lower layer; two packages of one layer do not import each other.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import grits_lab
+
+ROOT = Path(grits_lab.__file__).parent
+
+# Lowest first; the foundation modules at the package's root come first.
+LAYERS: list[set[str]] = [
+    {"errors"},
+    {"io", "seeding", "geometry", "lazy", "intervals", "versions"},
+    {"config", "records"},
+    {"runners", "training"},  # generic engines: parallel episodes, the torch training utilities
+    {"sim"},
+    {"perception"},
+    {"data"},  # storage only
+    {"sampling"},
+    {"policies", "spillage"},
+    {"collection", "evaluation"},  # the jobs
+    {"tune", "report"},
+    {"pipeline"},
+    {"cli"},
+]
+RANK = {name: i for i, layer in enumerate(LAYERS) for name in layer}
+
+
+def _part(module: Path) -> str:
+    """The package (or root module) of grits_lab that a source file belongs to."""
+    rel = module.relative_to(ROOT)
+    return rel.parts[0].removesuffix(".py")
+
+
+def _imports(path: Path) -> list[tuple[int, str]]:
+    """(line, dotted module) of every grits_lab import in the file, relative imports resolved."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    here = ["grits_lab", *path.relative_to(ROOT).with_suffix("").parts]
+    package = here[:-1]  # the package holding the file (an __init__'s own package)
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - node.level + 1]
+                names = [".".join(base + ([node.module] if node.module else []))]
+            else:
+                names = [node.module or ""]
+        elif isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        else:
+            continue
+        found += [(node.lineno, n) for n in names if n == "grits_lab" or n.startswith("grits_lab.")]
+    return found
+
+
+def _violations() -> list[str]:
+    out = []
+    for path in sorted(ROOT.rglob("*.py")):
+        source = _part(path)
+        if source == "__init__":
+            continue
+        assert source in RANK, f"{path.relative_to(ROOT)}: package {source!r} has no layer in tests/test_layering.py"
+        for line, module in _imports(path):
+            parts = module.split(".")
+            if len(parts) < 2:
+                continue  # `import grits_lab` (the version)
+            target = parts[1]
+            if target == source:
+                continue
+            assert target in RANK, f"{path.relative_to(ROOT)}:{line} imports {module}, which has no layer"
+            if RANK[target] >= RANK[source]:
+                out.append(f"{path.relative_to(ROOT)}:{line}: {source} (layer {RANK[source]}) imports {module} (layer {RANK[target]})")
+    return out
+
+
+def test_every_import_points_down_the_layers():
+    assert _violations() == []
+
+
+def test_no_package_reaches_another_through_importlib_or_a_module_path_string():
+    offenders = []
+    for path in sorted(ROOT.rglob("*.py")):
+        if path.name == "lazy.py":  # a package's own lazy exports, within the package
+            continue
+        text = path.read_text()
+        if "import_module(" in text or "__import__(" in text:
+            offenders.append(str(path.relative_to(ROOT)))
+        tree = ast.parse(text)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value.startswith("grits_lab.") \
+                    and ":" in node.value:
+                offenders.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.value!r}")
+    assert offenders == []
+
+
+def test_the_checker_sees_an_upward_import(tmp_path, monkeypatch):
+    """The rule is not vacuous: a data module importing evaluation is reported."""
+    fake = tmp_path / "grits_lab"
+    (fake / "data").mkdir(parents=True)
+    (fake / "data" / "leak.py").write_text("def f():\n    from grits_lab.evaluation.run import evaluate\n")
+    (fake / "data" / "fine.py").write_text("from ..sim import foods\nfrom . import format\n")
+    monkeypatch.setattr(__import__(__name__, fromlist=["ROOT"]), "ROOT", fake)
+    assert _violations() == ["data/leak.py:2: data (layer 6) imports grits_lab.evaluation.run (layer 9)"]
