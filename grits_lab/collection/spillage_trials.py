@@ -6,7 +6,7 @@ scoop followed by the lift-and-exit (food falling off the spoon outside the bowl
 on the way to a transfer), and records the spilled count at every waypoint. The trajectory is cut into chunks of `chunk_len` waypoints (the policy's n_action_steps); each chunk stores the composite
 and raw clouds observed at its start and whether the spilled count rose during it (contract 4).
 The label is 1 if any chunk spilled. Candidates are accepted in index order per shape until every
-(shape, label) bucket is full (`grits_lab.data.balance`); the acceptance rate is reported.
+(shape, label) bucket is full (`grits_lab.collection.balance`); the acceptance rate is reported.
 """
 
 from __future__ import annotations
@@ -248,7 +248,7 @@ def make_trial_spec(config: SpillageConfig, sim: Any, base: np.ndarray, bowl: di
 def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: np.ndarray, bowl: dict[str, Any], progress: bool = True) -> dict[str, Any]:
     """Generate candidates until every (shape, label) bucket is full; write accepted trials."""
     from grits_lab.config import config_from_dict
-    from grits_lab.data.balance import BalancedAcceptor
+    from grits_lab.collection.balance import BalancedAcceptor
     from grits_lab.collection.driver import Progress, failure_record
     from grits_lab.sim.config import SimConfig
 

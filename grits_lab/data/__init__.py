@@ -1,1 +1,48 @@
-"""Episode datasets on disk: one file per episode plus a Parquet index, readable with numpy and pandas."""
+"""Episode datasets on disk: one file per episode plus a Parquet index, readable with numpy and pandas.
+
+The storage layer: formats, indexes, summaries, normalizers fitted on stored arrays and the
+trajectory arithmetic they use. It runs nothing; the jobs that fill datasets are in
+grits_lab/collection.
+"""
+
+from grits_lab.data.format import (
+    EPISODE_DIR,
+    FORMAT_VERSION,
+    INDEX_FILE,
+    MANIFEST_FILE,
+    episode_path,
+    list_episode_files,
+    load_index,
+    read_episode,
+    read_meta,
+    rebuild_index,
+    verify_episode,
+    write_episode,
+)
+from grits_lab.data.info import dataset_summary, format_summary
+from grits_lab.data.normalize import ActionNormalizer, MinMaxNormalizer
+from grits_lab.data.trajectories import append_exit, as_pose9, mean_trajectory, resample, shift_trajectory
+
+__all__ = [
+    "ActionNormalizer",
+    "EPISODE_DIR",
+    "FORMAT_VERSION",
+    "INDEX_FILE",
+    "MANIFEST_FILE",
+    "MinMaxNormalizer",
+    "append_exit",
+    "as_pose9",
+    "dataset_summary",
+    "episode_path",
+    "format_summary",
+    "list_episode_files",
+    "load_index",
+    "mean_trajectory",
+    "read_episode",
+    "read_meta",
+    "rebuild_index",
+    "resample",
+    "shift_trajectory",
+    "verify_episode",
+    "write_episode",
+]

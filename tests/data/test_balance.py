@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from grits_lab.data.balance import BalancedAcceptor
+from grits_lab.collection.balance import BalancedAcceptor
 from grits_lab.seeding import derive_seed, make_rng
 
 
