@@ -24,7 +24,7 @@ from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atom
 from grits_lab.report import figures
 from grits_lab.report.loading import RunData, load_run
 from grits_lab.report.provenance import episode_counts, error_messages, report_provenance
-from grits_lab.report.guidance import guidance_figure, guidance_table, guided_episodes
+from grits_lab.report.guidance import guidance_by_plan_table, guidance_figure, guidance_table, guided_episodes
 from grits_lab.report.headline import headline_sentence, headline_table
 from grits_lab.report.render import (
     Collapsed,
@@ -145,6 +145,7 @@ def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Sec
                 _figure("guidance", table.title, "Left: the predictor's P(spill) of each guided episode's plans before the first and "
                         "after the last guidance step (lines pair one episode). Right: the guidance displacement per plan.",
                         guidance_figure(guided, out / "figures" / "guidance.png"), result),
+                *([_table(by_plan, out, result)] if not (by_plan := guidance_by_plan_table(guided)).data.empty else []),
             ]))
         long = ReportTable("breakdown_long", "Per method x food x level (long form)", "", episodes.head(0), breakdown_long(episodes))
         result.files.append(write_csv(long, out / "csv" / "breakdown_long.csv"))

@@ -89,6 +89,41 @@ def guidance_table(rows: pd.DataFrame) -> ReportTable:
                        pd.DataFrame(shown), pd.DataFrame(data))
 
 
+def guidance_by_plan_table(rows: pd.DataFrame, max_plans: int = 12) -> ReportTable:
+    """Per method variant and plan index (0 = the episode's first plan): plans, median P(spill) of
+    the unguided and of the executed sample, and median [90th percentile] displacement in mm per
+    waypoint. Shows where in the scoop guidance acts: a predictor that keeps a late, holding chunk
+    risky keeps moving the spoon, and a policy judged on whether it holds never gets to hold.
+    Empty when the records carry no per-plan comparison (`guidance.compare_unguided`)."""
+    columns = ("plan_p_spill_unguided", "plan_p_spill_guided", "plan_displacement_mm")
+    shown, data = [], []
+    if not set(columns) <= set(rows.columns):
+        return ReportTable("guidance_by_plan", "Guidance by plan index", "", pd.DataFrame(), pd.DataFrame())
+    for variant in ordered(rows["variant"].unique(), MAIN_METHODS):
+        part = rows[rows["variant"] == variant]
+        name = str(part["variant_name"].iloc[0])
+        per_plan: dict[int, list[tuple[float, float, float]]] = {}
+        for values in zip(*(part[c] for c in columns)):
+            if any(v is None or (isinstance(v, float) and np.isnan(v)) for v in values):
+                continue
+            for index, triple in enumerate(zip(*(np.asarray(v, dtype=float) for v in values))):
+                per_plan.setdefault(min(index, max_plans), []).append(triple)
+        for index in sorted(per_plan):
+            arr = np.asarray(per_plan[index])
+            numbers = {"variant": variant, "method_name": name, "plan": index, "plans": len(arr),
+                       "p_spill_unguided_median": float(np.median(arr[:, 0])), "p_spill_guided_median": float(np.median(arr[:, 1])),
+                       "displacement_mm_median": float(np.median(arr[:, 2])), "displacement_mm_p90": float(np.quantile(arr[:, 2], 0.9))}
+            data.append(numbers)
+            shown.append({"Method": name, "Plan": f"{index}+" if index == max_plans else str(index), "Plans": str(len(arr)),
+                          "P(spill) unguided": f"{numbers['p_spill_unguided_median']:.3f}",
+                          "P(spill) executed": f"{numbers['p_spill_guided_median']:.3f}",
+                          "Displacement (mm)": f"{numbers['displacement_mm_median']:.1f} [{numbers['displacement_mm_p90']:.1f}]"})
+    return ReportTable("guidance_by_plan", "Guidance by plan index: where in the scoop it acts",
+                       f"Plan 0 is each episode's first plan (plans {max_plans} and later pooled). Medians over the plans with that "
+                       "index; displacement: median [90th percentile] distance between the executed spoon positions of the unguided "
+                       "and the guided sample, mm per waypoint.", pd.DataFrame(shown), pd.DataFrame(data))
+
+
 def guidance_figure(rows: pd.DataFrame, path: Path) -> Path:
     """Two panels: P(spill) before vs after per method (box + points, paired lines), and the displacement per method."""
     from grits_lab.report.figures import _save, method_color, plt

@@ -145,3 +145,24 @@ def test_guidance_reads_the_unguided_comparison_per_plan_when_recorded(tmp_path)
     assert grits["p_spill_before_median"] == pytest.approx(0.3) and grits["p_spill_after_median"] == pytest.approx(0.2)
     assert grits["guidance_displacement_median"] == pytest.approx(4.0)
     assert grits["plans"] == 2 * grits["episodes"] and grits["plans_lowered"] == grits["episodes"]
+
+
+def test_guidance_by_plan_index_shows_where_in_the_scoop_guidance_acts(tmp_path):
+    frame = plausible_run(1)
+    guided = frame["method"] == "grits"
+    frame["guided_steps"] = guided.astype(int) * 6
+    for column in ("p_spill_before", "p_spill_after", "guidance_displacement", "p_spill_unguided", "p_spill_guided",
+                   "guidance_displacement_mm"):
+        frame[column] = np.where(guided, 0.5, np.nan)
+    # Three plans per episode: guidance barely moves the first, then pushes harder as P(spill) rises.
+    frame["plan_p_spill_unguided"] = [[0.01, 0.3, 0.2] if g else None for g in guided]
+    frame["plan_p_spill_guided"] = [[0.01, 0.2, 0.15] if g else None for g in guided]
+    frame["plan_displacement_mm"] = [[0.2, 9.0, 6.0] if g else None for g in guided]
+    frame.to_parquet(tmp_path / "episodes.parquet", index=False)
+    result = build_report(tmp_path)
+    table = next(t for t in result.tables if t.key == "guidance_by_plan")
+    grits = table.data.set_index("plan")
+    assert list(grits.index) == [0, 1, 2] and set(table.data["variant"]) == {"grits"}
+    assert grits.loc[1, "displacement_mm_median"] == pytest.approx(9.0) and grits.loc[0, "p_spill_unguided_median"] == pytest.approx(0.01)
+    assert (grits["plans"] == grits.loc[0, "plans"]).all() and grits.loc[0, "plans"] > 0
+    assert "Guidance by plan index" in (result.out_dir / "report.html").read_text()
