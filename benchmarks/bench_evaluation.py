@@ -79,7 +79,7 @@ def bench_latency(preset: str, repeats: int) -> dict[str, object]:
     rng = np.random.default_rng(0)
     obs = _obs(policy, bowl, max(points, policy.config.obs_encoder.points_per_object), rng)
     cloud = rng.normal(bowl, 0.04, (3, points, 3)).astype(np.float32)
-    guided_sampler = DDIMSampler(policy.noise_scheduler, GuidanceConfig(rho=2.5, threshold=30, gradient="x0", diagnostics=True))
+    guided_sampler = DDIMSampler(policy.noise_scheduler, GuidanceConfig(rho=2.5, s=30, gradient="x0", diagnostics=True, compare_unguided=False))
     cfg = policy.config
 
     def unguided() -> None:

@@ -117,7 +117,7 @@ def main() -> None:
             out[f"predictor_embedding_ms_batch{b}"] = round(embed_ms, 2)
             objective = make_objective(policy, cloud, device)
             for mode in ("x0", "xt"):
-                guided = DDIMSampler(policy.noise_scheduler, GuidanceConfig(rho=2.5, threshold=30, gradient=mode, diagnostics=False))
+                guided = DDIMSampler(policy.noise_scheduler, GuidanceConfig(rho=2.5, s=30, gradient=mode, diagnostics=False, compare_unguided=False))
                 ms = timed(lambda: policy.plan(obs, sampler=guided, objective=objective, generator=gen), args.repeats, device)
                 # the ratio counts the cloud embedding, which a guided plan computes once
                 out[f"guided_{mode}_plan_ms_batch{b}"] = round(ms + embed_ms, 2)

@@ -42,3 +42,20 @@ def _loader(path: Path):
                          ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_shipped_config_loads(path):
     assert _loader(path)(path) is not None
+
+
+@pytest.mark.parametrize("guidance, fragment", [
+    ({"threshold": 30}, "unknown key `guidance.threshold`"),
+    ({"rho": -1.0}, "`guidance.rho` must be non-negative"),
+    ({"s": -2}, "`guidance.s` must be at least -1"),
+])
+def test_the_evaluation_guidance_block_is_the_samplers_config_checked_by_key(guidance, fragment):
+    from grits_lab.errors import ConfigError
+    from grits_lab.evaluation.config import load_evaluation_config
+    from grits_lab.sampling import GuidanceConfig
+
+    path = ROOT / "experiments" / "evaluate_quick.yaml"
+    assert isinstance(load_evaluation_config(path).guidance, GuidanceConfig)
+    with pytest.raises(ConfigError, match="evaluate_quick.yaml: ") as info:
+        load_evaluation_config(path, {"guidance": guidance})
+    assert fragment in str(info.value)

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from grits_lab.config import config_from_dict, load_yaml, merge_mappings, require
-from grits_lab.sampling.guidance import PostHocConfig
+from grits_lab.sampling.guidance import GuidanceConfig, PostHocConfig
 from grits_lab.errors import ConfigError
 from grits_lab.perception.composite import CloudConfig
 from grits_lab.policies.control import ScoopSettings
@@ -22,28 +22,6 @@ from grits_lab.runners.config import ExecutorConfig
 UNSEEN_FOODS = [
     "sago", "red_bean", "mentos", "marshmallow", "fudge", "penne", "prune", "ramen_snack", "nuts", "milk_tea",
 ]
-
-
-@dataclass
-class GuidanceSettings:
-    """GRITS guidance (Algorithm 1). Paper: rho = 2.5, s = 30 on the 100-step scale, detached x0 gradient."""
-
-    rho: float = 2.5
-    s: int = 30
-    gradient: Literal["x0", "xt"] = "x0"
-    grad_clip: float | None = None  # per-axis clamp of the gradient (the authors' code clips)
-    clip_estimate: bool = False
-    # gradient: update = rho * grad P(spill) (the paper); normalized: rho * grad / ||grad||, so rho
-    # is the step length in normalized action units whatever the predictor (grits_lab/sampling/guidance.py).
-    step: Literal["gradient", "normalized"] = "gradient"
-    # Per plan, also denoise the same noise unguided and record P(spill) of both samples and how
-    # far the executed chunk moved (one more denoising pass per plan).
-    compare_unguided: bool = True
-
-    def __post_init__(self) -> None:
-        require(self.rho >= 0, "guidance.rho", self.rho, "non-negative")
-        require(self.s >= -1, "guidance.s", self.s, "at least -1 (-1 guides no step)")
-        require(self.grad_clip is None or self.grad_clip > 0, "guidance.grad_clip", self.grad_clip, "positive or null")
 
 
 @dataclass
@@ -118,7 +96,7 @@ class EvaluationConfig:
     levels: list[str] = field(default_factory=list)  # empty: every level each food defines
     trials: int = 5
     checkpoints: CheckpointPaths = field(default_factory=CheckpointPaths)
-    guidance: GuidanceSettings = field(default_factory=GuidanceSettings)
+    guidance: GuidanceConfig = field(default_factory=GuidanceConfig)  # Algorithm 1: rho = 2.5, s = 30, detached x0 gradient
     posthoc: PostHocConfig = field(default_factory=PostHocConfig)  # Diffusion Policy (Post.): authors' code, 6 steps
     scoop: ScoopSettings = field(default_factory=ScoopSettings)
     transfer: TransferSettings = field(default_factory=TransferSettings)

@@ -15,6 +15,7 @@ import numpy as np
 import torch
 
 from grits_lab.policies.control import Chunk, is_still
+from grits_lab.sampling.guidance import DDIMSampler, GuidanceConfig, PostHocConfig, PostHocSampler
 from grits_lab.seeding import derive_seed
 
 __all__ = ["BCController", "Chunk", "DiffusionController", "LearnedController", "ObsHistory", "is_still"]
@@ -95,20 +96,15 @@ class DiffusionController(LearnedController):
     dp and grits with rho = 0 see the very same noise and produce the very same episode.
     """
 
-    def __init__(self, policy: Any, predictor: Any, sampler_kind: str, guidance: Any, posthoc: Any, raw_cloud: bool = False) -> None:
-        from grits_lab.sampling import DDIMSampler, GuidanceConfig, PostHocSampler
-
+    def __init__(self, policy: Any, predictor: Any, sampler_kind: str, guidance: GuidanceConfig, posthoc: PostHocConfig,
+                 raw_cloud: bool = False) -> None:
         super().__init__(policy)
         self.predictor = predictor
         self.raw_cloud = raw_cloud
         self.n_action_steps = policy.config.n_action_steps
         scheduler = policy.noise_scheduler
         if sampler_kind == "guided":
-            self.sampler = DDIMSampler(scheduler, GuidanceConfig(
-                rho=guidance.rho, threshold=guidance.s, gradient=guidance.gradient,
-                grad_clip=guidance.grad_clip, clip_estimate=guidance.clip_estimate, diagnostics=True,
-                step=guidance.step, compare_unguided=guidance.compare_unguided,
-            ))
+            self.sampler = DDIMSampler(scheduler, guidance)
         elif sampler_kind == "posthoc":
             self.sampler = PostHocSampler(scheduler, posthoc)
         else:

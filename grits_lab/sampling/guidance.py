@@ -48,23 +48,30 @@ Objective = Callable[[torch.Tensor], torch.Tensor]
 
 @dataclass
 class GuidanceConfig:
-    """Guidance of Algorithm 1. Paper values: rho = 2.5, s = 30 on the 100-step training scale."""
+    """GRITS guidance (Algorithm 1): the sampler's settings and the `guidance:` block of an evaluation config.
+
+    Paper (SPEC): rho = 2.5, s = 30 on the 100-step training scale, detached A_{0|t} gradient.
+    The sweep (grits_lab/tune) overrides rho and s.
+    """
 
     rho: float = 2.5
-    threshold: int = 30  # s: steps with t <= s are guided (t on the training scale)
+    s: int = 30  # steps with t <= s are guided (t on the training scale); -1 guides no step
     gradient: Literal["x0", "xt"] = "x0"  # w.r.t. detached A_{0|t} (authors' code) or A_t (paper)
-    grad_clip: float | None = None  # clamp each gradient entry to [-c, c] (per axis) before scaling
+    grad_clip: float | None = None  # clamp each gradient entry to [-c, c] (per axis) before scaling (the authors' code clips)
     clip_estimate: bool = False  # clip A_{0|t} to the action range before evaluating f
     diagnostics: bool = True  # also evaluate f after the update (one more objective call per step)
-    step: Literal["gradient", "normalized"] = "gradient"  # rho * grad (paper) or rho * grad / ||grad|| (module docstring)
-    # Also denoise the same initial noise without guidance and evaluate f on both finished
-    # samples (one more unguided denoising pass per plan): what guidance changed, per plan.
-    compare_unguided: bool = False
+    # gradient: update = rho * grad f (the paper); normalized: rho * grad f / ||grad f||, so rho is
+    # the step length in normalized action units whatever the predictor (module docstring).
+    step: Literal["gradient", "normalized"] = "gradient"
+    # Per plan, also denoise the same initial noise without guidance and evaluate f on both
+    # finished samples (one more unguided denoising pass per plan): what guidance changed.
+    compare_unguided: bool = True
 
     def __post_init__(self) -> None:
-        require(self.rho >= 0, "rho", self.rho, "non-negative")
-        require(self.grad_clip is None or self.grad_clip > 0, "grad_clip", self.grad_clip, "positive or null")
-        require(self.step in ("gradient", "normalized"), "step", self.step, "gradient or normalized")
+        require(self.rho >= 0, "guidance.rho", self.rho, "non-negative")
+        require(self.s >= -1, "guidance.s", self.s, "at least -1 (-1 guides no step)")
+        require(self.grad_clip is None or self.grad_clip > 0, "guidance.grad_clip", self.grad_clip, "positive or null")
+        require(self.step in ("gradient", "normalized"), "guidance.step", self.step, "gradient or normalized")
 
 
 @dataclass
@@ -173,7 +180,7 @@ class DDIMSampler:
         g = self.guidance
         if g is None or g.rho == 0:
             return []
-        return [int(t) for t in self.scheduler.timesteps if int(t) <= g.threshold]
+        return [int(t) for t in self.scheduler.timesteps if int(t) <= g.s]
 
     def sample(
         self,

@@ -135,7 +135,7 @@ def test_guided_sampler_plugs_in_and_rho_zero_matches_plain(demo_dataset, tmp_pa
     zero = DDIMSampler(policy.noise_scheduler, GuidanceConfig(rho=0.0))
     same = policy.plan(obs, sampler=zero, objective=cost, generator=torch.Generator().manual_seed(1))
     assert np.array_equal(plain.actions, same.actions)
-    guided = DDIMSampler(policy.noise_scheduler, GuidanceConfig(rho=0.5, threshold=30))
+    guided = DDIMSampler(policy.noise_scheduler, GuidanceConfig(rho=0.5, s=30, compare_unguided=False))
     moved = policy.plan(obs, sampler=guided, objective=cost, generator=torch.Generator().manual_seed(1))
     assert len(moved.result.steps) == 6
     assert moved.actions[:, :, 2].mean() < plain.actions[:, :, 2].mean()

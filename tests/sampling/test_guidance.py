@@ -1,4 +1,4 @@
-"""Guided sampling (Algorithm 1) and post-hoc adjustment: exactness, direction, threshold semantics."""
+"""Guided sampling (Algorithm 1) and post-hoc adjustment: exactness, direction, the threshold s."""
 
 import math
 
@@ -42,16 +42,16 @@ def _sample(guidance, objective=x_coordinate_cost, seed=3, config=None):
 
 
 @pytest.mark.parametrize("gradient", ["x0", "xt"])
-def test_rho_zero_or_threshold_below_every_step_is_exactly_unguided(gradient):
+def test_rho_zero_or_s_below_every_step_is_exactly_unguided(gradient):
     plain = _sample(None, objective=None).sample
     assert torch.equal(_sample(GuidanceConfig(rho=0.0, gradient=gradient)).sample, plain)
-    assert torch.equal(_sample(GuidanceConfig(rho=2.5, threshold=-1, gradient=gradient)).sample, plain)
+    assert torch.equal(_sample(GuidanceConfig(rho=2.5, s=-1, gradient=gradient)).sample, plain)
 
 
 @pytest.mark.parametrize("gradient", ["x0", "xt"])
 def test_guidance_moves_the_sample_downhill(gradient):
     plain = _sample(None, objective=None).sample
-    guided = _sample(GuidanceConfig(rho=0.5, threshold=100, gradient=gradient, clip_estimate=False))
+    guided = _sample(GuidanceConfig(rho=0.5, s=100, gradient=gradient, clip_estimate=False))
     assert (x_coordinate_cost(guided.sample) < x_coordinate_cost(plain) - 0.05).all()
     # other axes are not pushed by an x-only cost as hard as x is
     shift = (plain - guided.sample).mean(dim=(0, 1))
@@ -61,15 +61,15 @@ def test_guidance_moves_the_sample_downhill(gradient):
         assert step.grad_norm.shape == (SHAPE[0],) and (step.displacement > 0).all()
 
 
-def test_threshold_selects_the_last_steps_on_the_training_scale():
+def test_s_selects_the_last_steps_on_the_training_scale():
     counter = CountingObjective(x_coordinate_cost)
-    result = _sample(GuidanceConfig(rho=1.0, threshold=30, diagnostics=False), objective=counter)
+    result = _sample(GuidanceConfig(rho=1.0, s=30, diagnostics=False, compare_unguided=False), objective=counter)
     assert [s.timestep for s in result.steps] == [30, 24, 18, 12, 6, 0]
     assert counter.calls == 6
-    assert DDIMSampler(DDIMConfig(), GuidanceConfig(threshold=29)).guided_timesteps() == [24, 18, 12, 6, 0]
-    assert len(DDIMSampler(DDIMConfig(), GuidanceConfig(threshold=100)).guided_timesteps()) == 16
+    assert DDIMSampler(DDIMConfig(), GuidanceConfig(s=29)).guided_timesteps() == [24, 18, 12, 6, 0]
+    assert len(DDIMSampler(DDIMConfig(), GuidanceConfig(s=100)).guided_timesteps()) == 16
     # guiding only late steps leaves earlier steps untouched: the trajectories agree before t = 30
-    early = _sample(GuidanceConfig(rho=1.0, threshold=30))
+    early = _sample(GuidanceConfig(rho=1.0, s=30))
     assert not torch.equal(early.sample, _sample(None, objective=None).sample)
 
 
@@ -80,7 +80,7 @@ def test_xt_gradient_is_the_x0_gradient_through_a_linear_denoiser():
     denoise = lambda x, t: c * x
     results = {}
     for mode in ("x0", "xt"):
-        sampler = DDIMSampler(sampler_cfg, GuidanceConfig(rho=1.0, threshold=90, gradient=mode))
+        sampler = DDIMSampler(sampler_cfg, GuidanceConfig(rho=1.0, s=90, gradient=mode))
         results[mode] = sampler.sample(denoise, (2, 4, 9), generator=torch.Generator().manual_seed(0), objective=x_coordinate_cost)
     ab = float(sampler.scheduler.alphas_cumprod[90])
     k = (1 - math.sqrt(1 - ab) * c) / math.sqrt(ab)
@@ -90,7 +90,7 @@ def test_xt_gradient_is_the_x0_gradient_through_a_linear_denoiser():
 
 def test_per_axis_clip_bounds_every_update_entry():
     big = lambda traj: 100.0 * traj[..., 0].mean(dim=1)
-    result = _sample(GuidanceConfig(rho=2.0, threshold=100, grad_clip=0.01), objective=big)
+    result = _sample(GuidanceConfig(rho=2.0, s=100, grad_clip=0.01), objective=big)
     n_entries = SHAPE[1] * SHAPE[2]
     for step in result.steps:
         assert (step.displacement <= 2.0 * 0.01 * math.sqrt(n_entries) + 1e-6).all()
@@ -131,22 +131,23 @@ def test_normalized_step_moves_rho_per_guided_step_whatever_the_gradient_scale()
     # normalized step does not.
     for scale in (1.0, 1000.0):
         cost = lambda traj, k=scale: k * x_coordinate_cost(traj)  # noqa: E731
-        result = _sample(GuidanceConfig(rho=0.2, threshold=100, step="normalized"), objective=cost)
+        result = _sample(GuidanceConfig(rho=0.2, s=100, step="normalized"), objective=cost)
         assert all(torch.allclose(s.displacement, torch.full((SHAPE[0],), 0.2)) for s in result.steps)
-    paper = [_sample(GuidanceConfig(rho=0.2, threshold=100), objective=lambda t, k=k: k * x_coordinate_cost(t)) for k in (1.0, 10.0)]
+    paper = [_sample(GuidanceConfig(rho=0.2, s=100), objective=lambda t, k=k: k * x_coordinate_cost(t)) for k in (1.0, 10.0)]
     assert (paper[1].steps[0].displacement > 5 * paper[0].steps[0].displacement).all()
 
 
 def test_compare_unguided_gives_the_plain_sample_from_the_same_noise_and_both_costs():
     plain = _sample(None, objective=None).sample
-    result = _sample(GuidanceConfig(rho=0.5, threshold=100, compare_unguided=True))
+    result = _sample(GuidanceConfig(rho=0.5, s=100, compare_unguided=True))
     assert torch.equal(result.unguided, plain)
     assert torch.allclose(result.cost_unguided, x_coordinate_cost(plain)) and torch.allclose(result.cost_final, x_coordinate_cost(result.sample))
     assert (result.cost_final < result.cost_unguided).all()
     summary = result.summary()
     assert summary["p_spill_guided"] < summary["p_spill_unguided"]
     # Without the comparison the guided sample is the same; only the extra pass is skipped.
-    assert torch.equal(_sample(GuidanceConfig(rho=0.5, threshold=100)).sample, result.sample)
+    alone = _sample(GuidanceConfig(rho=0.5, s=100, compare_unguided=False))
+    assert torch.equal(alone.sample, result.sample) and alone.unguided is None
 
 
 def test_posthoc_sampler_reports_the_unguided_sample_and_both_costs():
