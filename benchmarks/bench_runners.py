@@ -35,21 +35,18 @@ def main() -> None:
     import numpy as np
     import ray
 
-    from grits_lab.config import config_from_dict
     from grits_lab.collection.jobs import base_trajectory, load_collect_config
     from grits_lab.collection.spillage_trials import make_trial_spec, source_bowl_region
     from grits_lab.runners import SerialExecutor
     from grits_lab.runners.ray_executor import RayExecutor
     from grits_lab.runners.work import WorkerContext, execute_spec
-    from grits_lab.sim.config import SimConfig
 
     config = load_collect_config(args.config)
-    sim = config_from_dict(SimConfig, config.sim, "sim")
     base = base_trajectory(config)
     bowl = source_bowl_region(config)
     # One candidate trial repeated under distinct ids: every episode costs the same, so the 1 vs 2
     # worker ratio measures the engine's parallelism rather than the luck of the draw.
-    one = make_trial_spec(config, sim, base, bowl, args.shape, args.index)
+    one = make_trial_spec(config, base, bowl, args.shape, args.index)
     specs = [one.replace(episode_id=f"bench-{i:03d}") for i in range(args.episodes)]
 
     # Warm-up: imports and the first world build are paid once per worker, not per episode.

@@ -93,15 +93,14 @@ def lever_runs(args) -> dict:
     """Play the fixed set of shifted scoops under each lever; per lever: CPU time, spills, scoops."""
     import numpy as np
 
-    from grits_lab.collection.spillage_trials import SpillageConfig, _sim_config, expert_mean_trajectory, make_trial_spec, source_bowl_region
+    from grits_lab.collection.spillage_trials import SpillageConfig, expert_mean_trajectory, make_trial_spec, source_bowl_region
     from grits_lab.sim import ScoopEnv
     from grits_lab.sim.config import SimConfig
     from grits_lab.sim.foods import load_foods
 
     config = SpillageConfig()
-    sim = _sim_config(config)
     base, bowl = expert_mean_trajectory(config), source_bowl_region(config)
-    trajectories = [make_trial_spec(config, sim, base, bowl, "sphere", k).trajectory for k in range(args.lever_trials)]
+    trajectories = [make_trial_spec(config, base, bowl, "sphere", k).trajectory for k in range(args.lever_trials)]
     library = load_foods()
     out = {}
     for name, (cfg, grain) in _lever_configs(SimConfig()).items():

@@ -59,3 +59,60 @@ def test_the_evaluation_guidance_block_is_the_samplers_config_checked_by_key(gui
     with pytest.raises(ConfigError, match="evaluate_quick.yaml: ") as info:
         load_evaluation_config(path, {"guidance": guidance})
     assert fragment in str(info.value)
+
+
+def _stage_configs_with_a_sim_block() -> list[tuple[Path, str]]:
+    """(shipped stage config, dotted key of its sim block): evaluations, collections, policy trainings."""
+    from grits_lab.config import load_yaml
+
+    out = []
+    for path in sorted((ROOT / "experiments").glob("*.yaml")):
+        data = load_yaml(path)
+        if path.name.startswith("evaluate") or data.get("kind") in ("demos", "spillage"):
+            out.append((path, "sim"))
+        elif path.name.startswith("policy"):
+            out.append((path, "rollout.sim"))
+    return out
+
+
+@pytest.mark.parametrize("path, block", _stage_configs_with_a_sim_block(), ids=lambda v: v.name if isinstance(v, Path) else v)
+def test_a_misspelled_sim_key_in_a_shipped_stage_config_fails_at_load_naming_it(tmp_path, path, block):
+    import yaml
+
+    from grits_lab.config import load_yaml
+    from grits_lab.errors import ConfigError
+
+    data = load_yaml(path)
+    node = data
+    for part in block.split("."):
+        node = node.setdefault(part, {})
+    node["time_stpe"] = 0.005
+    bad = tmp_path / path.name
+    bad.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError) as info:
+        _loader(path)(bad)
+    assert f"unknown key `{block}.time_stpe`" in str(info.value)
+
+
+def test_collection_identities_keep_the_fingerprints_of_stored_datasets():
+    """A typed sim block leaves the identity of a default sim as it was (`sim: {}`), so datasets
+    collected before keep matching their config and resume instead of being refused."""
+    from grits_lab.config import config_fingerprint
+    from grits_lab.collection.jobs import load_collect_config
+
+    stored = {"demos.yaml": "44337bd0841efe53", "demos_cpu.yaml": "66784ff117cfd6ad", "demos_quick.yaml": "deaee82b43f607c7",
+              "spillage.yaml": "e6847f2aed697ab6", "spillage_cpu.yaml": "e572800d4c39c388", "spillage_quick.yaml": "4e44dd76c6349ce0"}
+    for name, fingerprint in stored.items():
+        config = load_collect_config(ROOT / "experiments" / name)
+        assert config.identity()["sim"] == {}
+        assert config_fingerprint(config.identity()) == fingerprint, name
+
+
+def test_an_evaluation_config_with_a_sim_override_round_trips_through_its_yaml_form():
+    from grits_lab.config import config_from_dict, config_to_dict
+    from grits_lab.evaluation.config import EvaluationConfig, load_evaluation_config
+
+    config = load_evaluation_config(ROOT / "experiments" / "evaluate_quick.yaml",
+                                    {"sim": {"time_step": 0.005, "cameras": [{"name": "front", "eye": [1, 0, 0.6], "target": [0.5, 0, 0]}]}})
+    assert config.sim.time_step == 0.005 and config.sim.cameras[0].eye == (1.0, 0.0, 0.6)
+    assert config_from_dict(EvaluationConfig, config_to_dict(config)) == config

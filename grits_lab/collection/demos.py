@@ -14,11 +14,12 @@ from typing import Any, Literal
 
 import numpy as np
 
-from grits_lab.config import config_to_dict, require
+from grits_lab.config import require
 from grits_lab.perception.composite import CloudConfig
 from grits_lab.runners.config import ExecutorConfig
 from grits_lab.runners.spec import EpisodeSpec
 from grits_lab.seeding import derive_seed, make_rng
+from grits_lab.sim.config import SimConfig
 
 TRAINING_FOODS = ["brown_rice", "soybeans", "mung_beans", "chocolate_balls", "dried_jujube", "orange"]
 
@@ -48,8 +49,7 @@ class DemosConfig:
     bowl_configs: int = 5
     # Cap on the number of episodes (null: all foods x levels x bowl configs = 80 by default).
     max_episodes: int | None = None
-    # Sim settings (grits_lab.sim.SimConfig keys); empty = the sim's defaults.
-    sim: dict[str, Any] = field(default_factory=dict)
+    sim: SimConfig = field(default_factory=SimConfig)
     cloud: CloudConfig = field(default_factory=CloudConfig)
     images: ImageConfig = field(default_factory=ImageConfig)
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)
@@ -61,17 +61,16 @@ class DemosConfig:
 
     def identity(self) -> dict[str, Any]:
         """What determines the data (the executor and the output path do not)."""
-        d = config_to_dict(self)
-        d.pop("executor")
-        d.pop("output")
-        return d
+        from grits_lab.collection.driver import collection_identity
+
+        return collection_identity(self)
 
 
 @dataclass
 class DemoEpisodeParams:
     """Everything a worker needs for one demonstration besides the spec's food, level and seed."""
 
-    sim: Any
+    sim: SimConfig
     cloud: CloudConfig
     images: ImageConfig
     bowl_config: int
@@ -80,12 +79,9 @@ class DemoEpisodeParams:
 
 def plan_demos(config: DemosConfig) -> list[EpisodeSpec]:
     """One spec per (food, level, bowl configuration), seeds derived from the root seed."""
-    from grits_lab.config import config_from_dict
-    from grits_lab.sim.config import SimConfig
     from grits_lab.sim.foods import check_food_names, load_foods
 
-    sim = config_from_dict(SimConfig, config.sim, "sim")
-    library = load_foods(sim.foods_file)
+    library = load_foods(config.sim.foods_file)
     check_food_names(library, config.foods, config.levels)
     specs = []
     # Bowl configuration outermost, so that a `max_episodes` cap still covers every food and level.
@@ -95,7 +91,7 @@ def plan_demos(config: DemosConfig) -> list[EpisodeSpec]:
             for level in config.levels or list(food_spec.levels):
                 if level not in food_spec.levels:
                     continue  # e.g. orange has one level only
-                params = DemoEpisodeParams(sim=sim, cloud=config.cloud, images=config.images, bowl_config=b, food_split=food_spec.split)
+                params = DemoEpisodeParams(sim=config.sim, cloud=config.cloud, images=config.images, bowl_config=b, food_split=food_spec.split)
                 specs.append(
                     EpisodeSpec(
                         episode_id=f"{food}-{level}-b{b}",

@@ -17,7 +17,7 @@ from typing import Any, Callable
 
 import yaml
 
-from grits_lab.config import config_fingerprint, config_to_dict
+from grits_lab.config import config_changes, config_fingerprint, config_to_dict
 from grits_lab.data.format import (
     FORMAT_VERSION,
     MANIFEST_FILE,
@@ -48,6 +48,17 @@ def data_code_hash() -> str:
                 digest.update(str(path.relative_to(root)).encode())
                 digest.update(path.read_bytes())
     return digest.hexdigest()[:16]
+
+
+def collection_identity(config: Any) -> dict[str, Any]:
+    """What determines a collection's data: its config without `executor` and `output`, with only
+    the `sim` keys that differ from the simulator's defaults (a stored dataset keeps its
+    fingerprint when the simulator gains a key with a default)."""
+    identity = config_to_dict(config)
+    identity.pop("executor")
+    identity.pop("output")
+    identity["sim"] = config_changes(config.sim)
+    return identity
 
 
 def existing_manifest(out_dir: str | Path, kind: str, identity: Any) -> dict[str, Any] | None:

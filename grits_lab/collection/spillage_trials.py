@@ -19,11 +19,12 @@ from typing import Any, Literal
 
 import numpy as np
 
-from grits_lab.config import config_from_dict, config_to_dict, require
+from grits_lab.config import require
 from grits_lab.perception.composite import CloudConfig
 from grits_lab.runners.config import ExecutorConfig
 from grits_lab.runners.spec import EpisodeSpec
 from grits_lab.seeding import derive_seed, make_rng
+from grits_lab.sim.config import SimConfig
 
 SHAPES = ["sphere", "cube", "cone", "cylinder"]
 
@@ -119,7 +120,7 @@ class SpillageConfig:
     particles: ParticleRanges = field(default_factory=ParticleRanges)
     shift: ShiftConfig = field(default_factory=ShiftConfig)
     exit: ExitConfig = field(default_factory=ExitConfig)
-    sim: dict[str, Any] = field(default_factory=dict)
+    sim: SimConfig = field(default_factory=SimConfig)
     cloud: CloudConfig = field(default_factory=CloudConfig)
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)
 
@@ -133,10 +134,10 @@ class SpillageConfig:
         require(self.max_candidates_factor >= 1, "max_candidates_factor", self.max_candidates_factor, "at least 1")
 
     def identity(self) -> dict[str, Any]:
-        d = config_to_dict(self)
-        d.pop("executor")
-        d.pop("output")
-        return d
+        """What determines the data (the executor and the output path do not)."""
+        from grits_lab.collection.driver import collection_identity
+
+        return collection_identity(self)
 
     def targets(self) -> dict[str, tuple[int, int]]:
         """(no-spill, spill) trials per shape: 4000 at 0.5 -> 500 / 500 for each of 4 shapes."""
@@ -149,7 +150,7 @@ class SpillageConfig:
 class SpillageTrialParams:
     """What a worker needs for one candidate trial besides the spec's seed and trajectory."""
 
-    sim: Any
+    sim: SimConfig
     cloud: CloudConfig
     particles: ParticleRanges
     shape: str
@@ -212,7 +213,7 @@ class CandidateLog:
             os.fsync(fh.fileno())
 
 
-def make_trial_spec(config: SpillageConfig, sim: Any, base: np.ndarray, bowl: dict[str, Any], shape: str, index: int) -> EpisodeSpec:
+def make_trial_spec(config: SpillageConfig, base: np.ndarray, bowl: dict[str, Any], shape: str, index: int) -> EpisodeSpec:
     """The spec of candidate (shape, index): its seed, its shifted trajectory and its parameters."""
     from grits_lab.data.trajectories import append_exit, shift_trajectory
 
@@ -224,7 +225,7 @@ def make_trial_spec(config: SpillageConfig, sim: Any, base: np.ndarray, bowl: di
         tilt_rng = make_rng(derive_seed(seed, "exit-tilt"))
         exit_tilt = float(tilt_rng.uniform(*e.tilt_deg) * tilt_rng.choice([-1.0, 1.0]))
         base = append_exit(
-            base, bowl["center"], e.direction_xy(), e.distance, e.rise, exit_speed, e.hold_steps, sim.control_hz,
+            base, bowl["center"], e.direction_xy(), e.distance, e.rise, exit_speed, e.hold_steps, config.sim.control_hz,
             tilt=np.deg2rad(exit_tilt), tilt_steps=e.tilt_steps,
         )
     rng = make_rng(derive_seed(seed, "shift"))
@@ -235,7 +236,7 @@ def make_trial_spec(config: SpillageConfig, sim: Any, base: np.ndarray, bowl: di
         clearance=s.clearance, ramp_steps=s.ramp_steps,
     )
     params = SpillageTrialParams(
-        sim=sim, cloud=config.cloud, particles=config.particles, shape=shape, chunk_len=config.chunk_len,
+        sim=config.sim, cloud=config.cloud, particles=config.particles, shape=shape, chunk_len=config.chunk_len,
         raw_cloud=config.raw_cloud, shift=[float(v) for v in shift], shift_scale=float(scale), exit_speed=exit_speed,
         exit_tilt_deg=exit_tilt,
     )
@@ -247,12 +248,9 @@ def make_trial_spec(config: SpillageConfig, sim: Any, base: np.ndarray, bowl: di
 
 def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: np.ndarray, bowl: dict[str, Any], progress: bool = True) -> dict[str, Any]:
     """Generate candidates until every (shape, label) bucket is full; write accepted trials."""
-    from grits_lab.config import config_from_dict
     from grits_lab.collection.balance import BalancedAcceptor
     from grits_lab.collection.driver import Progress, failure_record
-    from grits_lab.sim.config import SimConfig
 
-    sim = config_from_dict(SimConfig, config.sim, "sim")
     targets = config.targets()
     per_shape = config.trials // len(config.shapes)
     acceptor = BalancedAcceptor(targets, max_candidates=int(np.ceil(per_shape * config.max_candidates_factor)))
@@ -300,7 +298,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
     missing = [(e["shape"], int(e["index"])) for cid, e in logged.items() if e.get("accepted") and cid not in on_disk]
     while missing or executor.pending():
         while missing and executor.capacity() > 0:
-            executor.submit(make_trial_spec(config, sim, base, bowl, *missing.pop(0)))
+            executor.submit(make_trial_spec(config, base, bowl, *missing.pop(0)))
         for result in executor.poll():
             if result.ok:
                 writer.write(result.episode_id, result.payload)
@@ -317,7 +315,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
                 nxt = acceptor.next_candidate(by_shape)
                 if nxt is None:
                     break
-                spec = make_trial_spec(config, sim, base, bowl, *nxt)
+                spec = make_trial_spec(config, base, bowl, *nxt)
                 executor.submit(spec)
                 in_flight[spec.episode_id] = nxt[0]
             if executor.pending() == 0:
@@ -353,17 +351,11 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
     return summary
 
 
-def _sim_config(config: SpillageConfig) -> Any:
-    from grits_lab.sim.config import SimConfig
-
-    return config_from_dict(SimConfig, config.sim, "sim")
-
-
 def source_bowl_region(config: SpillageConfig) -> dict[str, Any]:
     """Where the source bowl is and how wide it is at each height (for keeping shifts feasible)."""
     from grits_lab.sim.shapes import BowlGeometry
 
-    sim = _sim_config(config)
+    sim = config.sim
     geometry = BowlGeometry()
     return {
         "center": np.array([sim.source_bowl_xy[0], sim.source_bowl_xy[1], 0.0]),
@@ -379,7 +371,7 @@ def expert_mean_trajectory(config: SpillageConfig) -> np.ndarray:
     from grits_lab.sim.env import scene_geometry
     from grits_lab.sim.expert import expert_trajectory, nominal_expert_trajectory
 
-    sim = _sim_config(config)
+    sim = config.sim
     scene = scene_geometry(sim, np.asarray(sim.target_workspace_center))
     if config.base_expert_plans == 0:
         return nominal_expert_trajectory(scene, sim.control_hz).astype(np.float64)

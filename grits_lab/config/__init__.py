@@ -1,6 +1,7 @@
 """Typed configs loaded from YAML and validated on load."""
 
 from grits_lab.config.loading import (
+    config_changes,
     config_fingerprint,
     config_from_dict,
     config_to_dict,
@@ -11,6 +12,7 @@ from grits_lab.config.loading import (
 )
 
 __all__ = [
+    "config_changes",
     "config_fingerprint",
     "config_from_dict",
     "config_to_dict",

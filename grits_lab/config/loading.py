@@ -169,6 +169,16 @@ def config_to_dict(config: Any) -> Any:
     return config
 
 
+def config_changes(config: Any) -> dict[str, Any]:
+    """Plain-YAML form of the fields of dataclass `config` that differ from its class's defaults."""
+    defaults = type(config)()
+    return {
+        f.name: config_to_dict(getattr(config, f.name))
+        for f in dataclasses.fields(config)
+        if getattr(config, f.name) != getattr(defaults, f.name)
+    }
+
+
 def config_fingerprint(config: Any) -> str:
     """A short stable hash of a config, used to tell whether stored outputs match it."""
     text = json.dumps(config_to_dict(config), sort_keys=True, default=str)

@@ -17,6 +17,7 @@ from grits_lab.errors import ConfigError
 from grits_lab.perception.composite import CloudConfig
 from grits_lab.policies.control import ScoopSettings
 from grits_lab.runners.config import ExecutorConfig
+from grits_lab.sim.config import SimConfig
 
 # The paper's ten unseen test foods (SPEC "Foods"), as named in grits_lab/sim/foods.yaml.
 UNSEEN_FOODS = [
@@ -102,7 +103,7 @@ class EvaluationConfig:
     transfer: TransferSettings = field(default_factory=TransferSettings)
     rule_based: RuleBasedSettings = field(default_factory=RuleBasedSettings)
     scone: SconeSettings = field(default_factory=SconeSettings)
-    sim: dict[str, Any] = field(default_factory=dict)  # grits_lab.sim.SimConfig keys
+    sim: SimConfig = field(default_factory=SimConfig)
     cloud: CloudConfig = field(default_factory=CloudConfig)
     num_threads: int = 1  # torch threads per worker
     flush_every: int = 4  # write the records file after this many finished episodes

@@ -96,7 +96,7 @@ class DiffusionController(LearnedController):
     dp and grits with rho = 0 see the very same noise and produce the very same episode.
     """
 
-    def __init__(self, policy: Any, predictor: Any, sampler_kind: str, guidance: GuidanceConfig, posthoc: PostHocConfig,
+    def __init__(self, policy: Any, predictor: Any, sampler_kind: str, guidance: GuidanceConfig | None, posthoc: PostHocConfig | None,
                  raw_cloud: bool = False) -> None:
         super().__init__(policy)
         self.predictor = predictor

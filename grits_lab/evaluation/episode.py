@@ -291,18 +291,15 @@ def evaluation_episode(spec: Any, context: Any) -> dict[str, Any]:
     """Work function (grits_lab/runners): one evaluation episode in a worker; models cached per worker."""
     import torch
 
-    from grits_lab.config import config_from_dict
     from grits_lab.evaluation.methods import METHODS, build_controller, guidance_columns
     from grits_lab.perception.scene import builder_for_env
-    from grits_lab.sim import SimConfig
     from grits_lab.sim.env import worker_env
 
     start = time.perf_counter()
     p = spec.params["evaluation"]
     config = p.config
     torch.set_num_threads(config.num_threads)
-    sim_config = config_from_dict(SimConfig, config.sim, "sim")
-    env = worker_env(context, sim_config)
+    env = worker_env(context, config.sim)
     from grits_lab.config import config_fingerprint
 
     builder = context.cached(("cloud-builder", config_fingerprint(config.cloud)), lambda: builder_for_env(config.cloud, env))

@@ -23,7 +23,7 @@ import pandas as pd
 import yaml
 from tqdm import tqdm
 
-from grits_lab.config import config_fingerprint, config_from_dict, config_to_dict
+from grits_lab.config import config_fingerprint, config_to_dict
 from grits_lab.errors import ConfigError, InputError, StorageError
 from grits_lab.evaluation.config import EvaluationConfig, load_evaluation_config
 from grits_lab.evaluation.episode import evaluation_episode
@@ -67,11 +67,9 @@ class EpisodeParams:
 
 def episode_keys(config: EvaluationConfig) -> list[EpisodeKey]:
     """Every (food, level, trial) of the config, with seeds derived from the root seed."""
-    from grits_lab.sim import SimConfig
     from grits_lab.sim.foods import check_food_names, load_foods
 
-    sim = config_from_dict(SimConfig, config.sim, "sim")
-    library = load_foods(sim.foods_file)
+    library = load_foods(config.sim.foods_file)
     check_food_names(library, config.foods, config.levels)
     keys = []
     for food in config.foods:

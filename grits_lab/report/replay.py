@@ -204,11 +204,9 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
     """
     import torch
 
-    from grits_lab.config import config_from_dict
     from grits_lab.evaluation.episode import run_episode
     from grits_lab.evaluation.methods import METHODS, build_controller
     from grits_lab.perception.scene import builder_for_env
-    from grits_lab.sim import SimConfig
     from grits_lab.sim.env import ScoopEnv
     from grits_lab.sim.video import VIDEO_CAMERA, check_video_path, write_video
 
@@ -218,8 +216,7 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
     config = load_run_config(run_dir, record)
     paths = checked_checkpoints(method, config, record)
     torch.set_num_threads(config.num_threads)
-    sim_config = config_from_dict(SimConfig, config.sim, "sim")
-    env = ScoopEnv(sim_config)
+    env = ScoopEnv(config.sim)
     cache: dict[Any, Any] = {}
     rho, s = record.get("rho"), int(record.get("s", -1))
     rho = math.nan if rho is None else float(rho)
@@ -243,7 +240,7 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
     mismatches = {k: (record[k], replayed[k]) for k in compared if not _equal(record[k], replayed[k])}
     result = ReplayResult(method, food, str(level), int(trial), int(record["seed"]), rho, s, compared, mismatches, replayed=replayed)
     if video is not None:
-        result.video = str(write_video(video, played.frames, fps=sim_config.control_hz / played._every))
+        result.video = str(write_video(video, played.frames, fps=config.sim.control_hz / played._every))
         result.frames = len(played.frames)
     if plan_figure is not None:
         from grits_lab.report.guidance import plan_figure as draw_plan

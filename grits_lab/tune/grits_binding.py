@@ -50,11 +50,9 @@ def _validation_keys(config: StudyConfig, evaluation: EvaluationConfig, method: 
     """Before any study exists: the validation episodes are episodes of the evaluation config's
     food library, the method's checkpoints fit together, and the Ray cluster it runs on answers.
     Returns the validation episodes as evaluation keys."""
-    from grits_lab.config import config_from_dict
-    from grits_lab.sim import SimConfig
     from grits_lab.sim.foods import load_foods
 
-    library = load_foods(config_from_dict(SimConfig, evaluation.sim, "sim").foods_file)
+    library = load_foods(evaluation.sim.foods_file)
     config.validation.check_names(library)
     if method not in METHODS:
         raise ConfigError(f"`evaluation.method` must be one of {', '.join(METHODS)}. Got {method!r}.")

@@ -68,10 +68,10 @@ def test_spillage_trial_clouds_have_n_points_where_the_objects_are(tmp_path):
     from grits_lab.seeding import derive_seed, make_rng
     from grits_lab.sim.env import worker_env
     from grits_lab.sim.foods import fill_count, primitive_food
-    from grits_lab.collection.spillage_trials import _sim_config, make_trial_spec, source_bowl_region
+    from grits_lab.collection.spillage_trials import make_trial_spec, source_bowl_region
 
     config = _short_spillage_config(tmp_path)
-    spec = make_trial_spec(config, _sim_config(config), base_trajectory(config), source_bowl_region(config), "sphere", 0)
+    spec = make_trial_spec(config, base_trajectory(config), source_bowl_region(config), "sphere", 0)
     ctx = WorkerContext()
     try:
         result = execute_spec(spec, ctx)

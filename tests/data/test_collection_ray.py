@@ -11,7 +11,7 @@ ray = pytest.importorskip("ray")
 from grits_lab.config import config_from_dict  # noqa: E402
 from grits_lab.data.format import list_episode_files, read_episode  # noqa: E402
 from grits_lab.collection.jobs import base_trajectory, run_collection  # noqa: E402
-from grits_lab.collection.spillage_trials import SpillageConfig, _sim_config, make_trial_spec, source_bowl_region  # noqa: E402
+from grits_lab.collection.spillage_trials import SpillageConfig, make_trial_spec, source_bowl_region  # noqa: E402
 from grits_lab.runners import SerialExecutor  # noqa: E402
 from grits_lab.runners.ray_executor import RayExecutor  # noqa: E402
 
@@ -36,8 +36,8 @@ def test_serial_and_ray_give_identical_simulated_records():
         "cloud": {"n_points": 128, "cad_surface_samples": 1000}, "sim": {"cameras": CAMERAS},
     })
     base = base_trajectory(config)[:30]
-    sim, bowl = _sim_config(config), source_bowl_region(config)
-    specs = [make_trial_spec(config, sim, base, bowl, shape, k) for shape in ("sphere", "cube") for k in range(2)]
+    bowl = source_bowl_region(config)
+    specs = [make_trial_spec(config, base, bowl, shape, k) for shape in ("sphere", "cube") for k in range(2)]
     with SerialExecutor() as ex:
         serial = {r.episode_id: r for r in ex.map_unordered(specs)}
     with RayExecutor(workers=2) as ex:

@@ -5,7 +5,7 @@ import pytest
 
 from grits_lab.config import config_from_dict
 
-from grits_lab.collection.spillage_trials import SpillageConfig, _sim_config, expert_mean_trajectory, make_trial_spec, source_bowl_region
+from grits_lab.collection.spillage_trials import SpillageConfig, expert_mean_trajectory, make_trial_spec, source_bowl_region
 from grits_lab.data.trajectories import append_exit, shift_trajectory
 from grits_lab.errors import ConfigError
 from grits_lab.geometry import rot6d_to_matrix
@@ -80,11 +80,11 @@ def test_a_tilted_exit_rolls_the_spoon_outside_the_bowl_about_its_direction_of_t
 
 def test_exit_tilts_are_drawn_per_trial_within_range_with_either_sign():
     config = config_from_dict(SpillageConfig, {"exit": {"tilt_deg": [10.0, 40.0]}})
-    sim, bowl, base = _sim_config(config), source_bowl_region(config), expert_mean_trajectory(config)
-    tilts = np.array([make_trial_spec(config, sim, base, bowl, "cube", k).params["trial"].exit_tilt_deg for k in range(30)])
+    bowl, base = source_bowl_region(config), expert_mean_trajectory(config)
+    tilts = np.array([make_trial_spec(config, base, bowl, "cube", k).params["trial"].exit_tilt_deg for k in range(30)])
     assert np.all((np.abs(tilts) >= 10.0) & (np.abs(tilts) <= 40.0))
     assert (tilts > 0).any() and (tilts < 0).any()
-    assert tilts[3] == make_trial_spec(config, sim, base, bowl, "cube", 3).params["trial"].exit_tilt_deg
+    assert tilts[3] == make_trial_spec(config, base, bowl, "cube", 3).params["trial"].exit_tilt_deg
 
 
 def _run_candidate(tilt_deg: float) -> dict:
@@ -92,7 +92,7 @@ def _run_candidate(tilt_deg: float) -> dict:
         "particles": {"fill_height": [0.02, 0.02], "radius": [0.005, 0.005]}, "shift": {"x": 0.0, "y": 0.0, "z": 0.0},
         "exit": {"tilt_deg": [tilt_deg, tilt_deg], "speed": [0.4, 0.4]}, "raw_cloud": False, "cloud": {"n_points": 64},
     })
-    spec = make_trial_spec(config, _sim_config(config), expert_mean_trajectory(config), source_bowl_region(config), "sphere", 0)
+    spec = make_trial_spec(config, expert_mean_trajectory(config), source_bowl_region(config), "sphere", 0)
     ctx = WorkerContext()
     try:
         result = execute_spec(spec, ctx)
@@ -114,14 +114,14 @@ def test_the_default_exit_is_reachable_at_the_extremes_of_shift_and_tilt():
     from grits_lab.sim.env import ScoopEnv
 
     config = SpillageConfig()
-    sim, bowl, base = _sim_config(config), source_bowl_region(config), expert_mean_trajectory(config)
+    bowl, base = source_bowl_region(config), expert_mean_trajectory(config)
     e = config.exit
-    env = ScoopEnv(sim)
+    env = ScoopEnv(config.sim)
     try:
         for dz, tilt in [(-config.shift.z, e.tilt_deg[1]), (config.shift.z, -e.tilt_deg[1])]:
             shifted = base.copy()
             shifted[10:, 2] += dz
-            traj = append_exit(shifted, bowl["center"], e.direction_xy(), e.distance, e.rise, e.speed[1], e.hold_steps, sim.control_hz,
+            traj = append_exit(shifted, bowl["center"], e.direction_xy(), e.distance, e.rise, e.speed[1], e.hold_steps, config.sim.control_hz,
                                tilt=np.deg2rad(tilt), tilt_steps=e.tilt_steps)
             env.reset(seed=0)
             failures = [t for t, a in enumerate(traj) if env.step(a)[4]["ik_failure"]]
@@ -132,15 +132,15 @@ def test_the_default_exit_is_reachable_at_the_extremes_of_shift_and_tilt():
 
 def test_trial_specs_are_data_of_their_seed_and_end_outside_the_bowl():
     config = SpillageConfig()
-    sim, bowl = _sim_config(config), source_bowl_region(config)
+    bowl = source_bowl_region(config)
     base = expert_mean_trajectory(config)
-    a = make_trial_spec(config, sim, base, bowl, "cone", 3)
-    b = make_trial_spec(config, sim, base, bowl, "cone", 3)
-    c = make_trial_spec(config, sim, base, bowl, "cone", 4)
+    a = make_trial_spec(config, base, bowl, "cone", 3)
+    b = make_trial_spec(config, base, bowl, "cone", 3)
+    c = make_trial_spec(config, base, bowl, "cone", 4)
     np.testing.assert_array_equal(a.trajectory, b.trajectory)
     assert a.params["trial"].exit_speed == b.params["trial"].exit_speed
     assert a.params["trial"].exit_speed != c.params["trial"].exit_speed
-    speeds = [make_trial_spec(config, sim, base, bowl, "cube", k).params["trial"].exit_speed for k in range(20)]
+    speeds = [make_trial_spec(config, base, bowl, "cube", k).params["trial"].exit_speed for k in range(20)]
     assert min(speeds) >= config.exit.speed[0] and max(speeds) <= config.exit.speed[1]
     end = a.trajectory[-1, :2] - bowl["center"][:2]
     assert np.linalg.norm(end) > BOWL.outer_radius
@@ -148,4 +148,4 @@ def test_trial_specs_are_data_of_their_seed_and_end_outside_the_bowl():
     with pytest.raises(ConfigError, match="exit.tilt_deg"):
         config_from_dict(SpillageConfig, bad)
     off = config_from_dict(SpillageConfig, {"exit": {"enabled": False}})
-    assert len(make_trial_spec(off, sim, base, bowl, "cone", 3).trajectory) == len(base)
+    assert len(make_trial_spec(off, base, bowl, "cone", 3).trajectory) == len(base)
