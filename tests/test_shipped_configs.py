@@ -116,3 +116,32 @@ def test_an_evaluation_config_with_a_sim_override_round_trips_through_its_yaml_f
                                     {"sim": {"time_step": 0.005, "cameras": [{"name": "front", "eye": [1, 0, 0.6], "target": [0.5, 0, 0]}]}})
     assert config.sim.time_step == 0.005 and config.sim.cameras[0].eye == (1.0, 0.0, 0.6)
     assert config_from_dict(EvaluationConfig, config_to_dict(config)) == config
+
+
+@pytest.mark.parametrize("name, count, digest", [
+    ("evaluate.yaml", 100, "7bccbf48c17cd090"),
+    ("evaluate_cpu.yaml", 100, "7bccbf48c17cd090"),
+    ("evaluate_quick.yaml", 10, "33fb0e54b82bec26"),
+])
+def test_shipped_evaluations_keep_their_episodes_and_seeds(name, count, digest):
+    """Digests of [[food, level, trial, seed], ...] from before the episode grid was shared with the sweep."""
+    import hashlib
+    import json
+
+    from grits_lab.evaluation.config import load_evaluation_config
+    from grits_lab.evaluation.run import episode_keys
+
+    rows = [[k.food, k.level, k.trial, k.seed] for k in episode_keys(load_evaluation_config(ROOT / "experiments" / name))]
+    assert len(rows) == count and hashlib.sha256(json.dumps(rows).encode()).hexdigest()[:16] == digest
+
+
+def test_a_sweeps_validation_block_as_an_evaluation_config_gives_the_same_episodes():
+    from grits_lab.config import load_yaml
+    from grits_lab.evaluation.config import load_evaluation_config
+    from grits_lab.evaluation.run import episode_keys
+    from grits_lab.tune.config import load_study_config
+
+    sweep = ROOT / "sweeps" / "grits_quick.yaml"
+    validation = load_yaml(sweep)["validation"]
+    evaluation = load_evaluation_config(ROOT / "experiments" / "evaluate_quick.yaml", validation)
+    assert episode_keys(evaluation) == load_study_config(sweep).episodes()

@@ -5,5 +5,6 @@ from grits_lab.lazy import lazy_exports
 __getattr__, __dir__, __all__ = lazy_exports(__name__, {
     "config": ["EvaluationConfig", "load_evaluation_config"],
     "methods": ["METHODS", "MethodSpec"],
-    "run": ["EpisodeKey", "episode_keys", "evaluate", "evaluate_file", "evaluate_guidance"],
+    "grid": ["EpisodeGrid", "EpisodeKey"],
+    "run": ["episode_keys", "evaluate", "evaluate_file", "evaluate_guidance"],
 })

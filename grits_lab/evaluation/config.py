@@ -14,15 +14,11 @@ from typing import Any, Literal
 from grits_lab.config import config_from_dict, load_yaml, merge_mappings, require
 from grits_lab.sampling.guidance import GuidanceConfig, PostHocConfig
 from grits_lab.errors import ConfigError
+from grits_lab.evaluation.grid import EpisodeGrid
 from grits_lab.perception.composite import CloudConfig
 from grits_lab.policies.control import ScoopSettings
 from grits_lab.runners.config import ExecutorConfig
 from grits_lab.sim.config import SimConfig
-
-# The paper's ten unseen test foods (SPEC "Foods"), as named in grits_lab/sim/foods.yaml.
-UNSEEN_FOODS = [
-    "sago", "red_bean", "mentos", "marshmallow", "fudge", "penne", "prune", "ramen_snack", "nuts", "milk_tea",
-]
 
 
 @dataclass
@@ -86,16 +82,13 @@ class SconeSettings:
 
 
 @dataclass
-class EvaluationConfig:
-    """One evaluation run: methods x foods x levels x trials, with the same seeds for every method."""
+class EvaluationConfig(EpisodeGrid):
+    """One evaluation run: methods x the episode grid (foods x levels x trials; default the paper's
+    10 unseen foods, every level, 5 trials, root seed 0), with the same seeds for every method."""
 
     run_id: str = "evaluate"
     output_dir: str = "results/evaluate"
-    seed: int = 0  # root seed: episode seed = derive_seed(seed, food, level, trial)
     methods: list[str] = field(default_factory=lambda: ["grits", "dp"])
-    foods: list[str] = field(default_factory=lambda: list(UNSEEN_FOODS))
-    levels: list[str] = field(default_factory=list)  # empty: every level each food defines
-    trials: int = 5
     checkpoints: CheckpointPaths = field(default_factory=CheckpointPaths)
     guidance: GuidanceConfig = field(default_factory=GuidanceConfig)  # Algorithm 1: rho = 2.5, s = 30, detached x0 gradient
     posthoc: PostHocConfig = field(default_factory=PostHocConfig)  # Diffusion Policy (Post.): authors' code, 6 steps
@@ -117,13 +110,12 @@ class EvaluationConfig:
     def __post_init__(self) -> None:
         from grits_lab.evaluation.methods import METHODS
 
+        super().__post_init__()
         require(bool(self.run_id.strip()), "run_id", self.run_id, "a non-empty name")
         require(len(self.methods) >= 1, "methods", self.methods, "a non-empty list")
         for m in self.methods:
             require(m in METHODS, "methods", m, f"one of {', '.join(METHODS)}")
         require(len(set(self.methods)) == len(self.methods), "methods", self.methods, "without repeats")
-        require(len(self.foods) >= 1, "foods", self.foods, "a non-empty list")
-        require(self.trials >= 1, "trials", self.trials, "at least 1")
         require(self.num_threads >= 1, "num_threads", self.num_threads, "at least 1")
         require(self.flush_every >= 1, "flush_every", self.flush_every, "at least 1")
 

@@ -24,9 +24,10 @@ import yaml
 from tqdm import tqdm
 
 from grits_lab.config import config_fingerprint, config_to_dict
-from grits_lab.errors import ConfigError, InputError, StorageError
+from grits_lab.errors import InputError, StorageError
 from grits_lab.evaluation.config import EvaluationConfig, load_evaluation_config
 from grits_lab.evaluation.episode import evaluation_episode
+from grits_lab.evaluation.grid import EpisodeKey
 from grits_lab.evaluation.methods import (
     METHODS, check_method_checkpoints, file_digest, guidance_columns, method_checkpoints,
 )
@@ -35,21 +36,9 @@ from grits_lab.records import RECORD_COLUMNS
 from grits_lab.runners import EpisodeResult, EpisodeSpec, make_executor
 from grits_lab.runners.base import Executor
 from grits_lab.runners.config import check_reachable, cluster_address
-from grits_lab.seeding import derive_seed
 
 RECORDS_FILE = "episodes.parquet"
 IDENTITY = ("method", "food", "level", "trial", "seed", "rho", "s")
-
-
-@dataclass(frozen=True)
-class EpisodeKey:
-    """One (food, level, trial) with its seed; the same for every method."""
-
-    food: str
-    level: str
-    trial: int
-    seed: int
-    split: str = "unseen"
 
 
 @dataclass
@@ -66,22 +55,10 @@ class EpisodeParams:
 
 
 def episode_keys(config: EvaluationConfig) -> list[EpisodeKey]:
-    """Every (food, level, trial) of the config, with seeds derived from the root seed."""
-    from grits_lab.sim.foods import check_food_names, load_foods
+    """Every (food, level, trial) of the config, with seeds derived from the root seed (EpisodeGrid.keys)."""
+    from grits_lab.sim.foods import load_foods
 
-    library = load_foods(config.sim.foods_file)
-    check_food_names(library, config.foods, config.levels)
-    keys = []
-    for food in config.foods:
-        spec = library.get(food)
-        levels = config.levels or list(spec.levels)
-        present = [lv for lv in levels if lv in spec.levels]
-        if config.levels and not present:
-            raise ConfigError(f"`levels` {config.levels} names no level of food {food!r} (its levels: {', '.join(spec.levels)})")
-        for level in present:
-            for trial in range(config.trials):
-                keys.append(EpisodeKey(food, level, trial, derive_seed(config.seed, food, level, trial), spec.split))
-    return keys
+    return config.keys(load_foods(config.sim.foods_file))
 
 
 def identity_of(row: dict[str, Any]) -> tuple:

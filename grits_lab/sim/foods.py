@@ -343,12 +343,11 @@ def primitive_food(
     return spec, min(level_count(spec, "random", "trial"), MAX_PARTICLES)
 
 
-def check_food_names(library: FoodLibrary, foods: list[str], levels: list[str], key_prefix: str = "",
-                     every_food: bool = False) -> None:
+def check_food_names(library: FoodLibrary, foods: list[str], levels: list[str], key_prefix: str = "") -> None:
     """Refuse, naming the key, a food the library lacks or a quantity level no listed food has.
 
     Foods may define different levels (orange has one), so a level is a typo only when none of
-    `foods` has it; with `every_food` each food must have each level (every pair is an episode).
+    `foods` has it.
     """
     for food in foods:
         if food not in library.foods:
@@ -356,6 +355,6 @@ def check_food_names(library: FoodLibrary, foods: list[str], levels: list[str], 
                               f"(foods: {', '.join(sorted(library.foods))})")
     for level in levels:
         lacking = [food for food in foods if level not in library.foods[food].levels]
-        if lacking and (every_food or len(lacking) == len(foods)):
+        if lacking and len(lacking) == len(foods):
             raise ConfigError(f"`{key_prefix}levels` names {level!r}, which food {lacking[0]!r} does not have "
                               f"(its levels: {', '.join(library.foods[lacking[0]].levels)})")

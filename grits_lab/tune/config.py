@@ -1,8 +1,9 @@
 """The sweep's typed config: search ranges for rho and s, objective, sampler, storage, episodes.
 
 A sweep file (sweeps/NAME.yaml) is loaded into `StudyConfig` and checked on load, so a reversed
-range, a log range through zero or a default outside its range fails before any storage is
-opened or any episode runs, with one line that names the key.
+range, a log range through zero, a default outside its range or a validation food or level the
+food library lacks fails before any storage is opened or any episode runs, with one line that
+names the key.
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
 from grits_lab.config import config_fingerprint, load_config, require
-from grits_lab.seeding import derive_seed
+from grits_lab.errors import ConfigError, InputError
+from grits_lab.evaluation.grid import EpisodeGrid, EpisodeKey
 
 if TYPE_CHECKING:
     from grits_lab.sim.foods import FoodLibrary
@@ -116,49 +118,20 @@ class SamplerConfig:
         require(self.n_startup_trials >= 0, "sampler.n_startup_trials", self.n_startup_trials, ">= 0")
 
 
-@dataclass(frozen=True)
-class ValidationEpisode:
-    """One validation episode; its seed is derived from (root seed, food, level, trial)."""
+@dataclass
+class ValidationConfig(EpisodeGrid):
+    """The episodes every trial is evaluated on: an evaluation config's episode grid (foods x levels
+    x trials, episode seed = derive_seed(seed, food, level, trial)), checked by the same code.
 
-    food: str
-    level: str
-    trial: int
-    seed: int
-
-
-@dataclass(frozen=True)
-class ValidationConfig:
-    """The episodes every trial is evaluated on: foods x levels x trials, seeds derived from root_seed.
-
-    Use a root seed different from the final evaluation's so that tuning does not see test episodes.
+    Only the defaults differ: foods and levels must be named (the evaluation's default foods are
+    the test foods), and the root seed is 7000. Use a root seed different from the final
+    evaluation's so that tuning does not see test episodes.
     """
 
     foods: list[str]
-    levels: list[str]
+    levels: list[str]  # empty: every level each food defines
     trials: int = 2
-    root_seed: int = 7000
-
-    def __post_init__(self) -> None:
-        require(len(self.foods) > 0, "validation.foods", self.foods, "a non-empty list of food names")
-        require(len(set(self.foods)) == len(self.foods), "validation.foods", self.foods, "without repeats")
-        require(len(self.levels) > 0, "validation.levels", self.levels, "a non-empty list of level names")
-        require(len(set(self.levels)) == len(self.levels), "validation.levels", self.levels, "without repeats")
-        require(self.trials >= 1, "validation.trials", self.trials, ">= 1")
-        require(self.root_seed >= 0, "validation.root_seed", self.root_seed, ">= 0")
-
-    def check_names(self, library: "FoodLibrary") -> None:
-        """Every food exists in `library` and has every level: each (food, level) pair is an episode."""
-        from grits_lab.sim.foods import check_food_names
-
-        check_food_names(library, self.foods, self.levels, key_prefix="validation.", every_food=True)
-
-    def episodes(self) -> list[ValidationEpisode]:
-        return [
-            ValidationEpisode(food, level, index, derive_seed(self.root_seed, food, level, index))
-            for food in self.foods
-            for level in self.levels
-            for index in range(self.trials)
-        ]
+    seed: int = 7000
 
 
 @dataclass(frozen=True)
@@ -239,12 +212,39 @@ class StudyConfig:
 
     def identity(self) -> str:
         """Fingerprint of what makes trials comparable: ranges, objective, episodes, evaluator."""
+        v = self.validation
         return config_fingerprint({
             "rho": self.rho, "s": self.s, "train_timesteps": self.train_timesteps,
-            "objective": self.objective, "validation": self.validation,
+            "objective": self.objective,
+            # the validation block as studies stored it when its root seed was called `root_seed`,
+            # so that those studies still resume
+            "validation": {"foods": v.foods, "levels": v.levels, "trials": v.trials, "root_seed": v.seed},
             "evaluator": self.evaluator, "evaluation": self.evaluation,
         })
 
+    def food_library(self) -> "FoodLibrary":
+        """The food library the episodes come from: the evaluation config's (`evaluator: grits`), else the packaged one."""
+        from grits_lab.sim.foods import load_foods
+
+        if self.evaluator == "synthetic":
+            return load_foods()
+        from grits_lab.evaluation.config import load_evaluation_config
+
+        if not Path(str(self.evaluation.config)).is_file():
+            raise InputError(f"evaluation config not found: {self.evaluation.config} (set `evaluation.config` in the sweep file)")
+        return load_foods(load_evaluation_config(str(self.evaluation.config)).sim.foods_file)
+
+    def episodes(self) -> list[EpisodeKey]:
+        """The validation episodes (ConfigError naming `validation.foods` / `validation.levels` for a
+        food or level the food library lacks)."""
+        return self.validation.keys(self.food_library(), key_prefix="validation.")
+
 
 def load_study_config(path: str | Path) -> StudyConfig:
-    return load_config(path, StudyConfig)
+    """Load and check a sweep file, its validation episodes included."""
+    config = load_config(path, StudyConfig)
+    try:
+        config.episodes()
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+    return config

@@ -1,11 +1,12 @@
-"""The one place where the sweep binds to the GRITS evaluation layer (`grits_lab.evaluation`).
+"""The one place where the sweep runs GRITS through the evaluation layer (`grits_lab.evaluation`).
 
 The sweep sits above evaluation and calls it directly: the evaluation config is loaded once, the
-validation episodes become evaluation `EpisodeKey`s (seeds from the sweep's own root, so no tuning
-episode is a test episode), and each trial runs `grits_lab.evaluation.run.evaluate_guidance` with
-its (rho, s), getting one evaluation record per episode (columns of grits_lab/records.py).
-Everything the sweep needs from evaluation goes through `GritsEvaluator`; nothing else in
-grits_lab.tune imports the evaluation layer.
+validation episodes are evaluation `EpisodeKey`s (the sweep's validation block is an evaluation
+episode grid with its own root seed, so no tuning episode is a test episode: `StudyConfig.episodes`),
+and each trial runs `grits_lab.evaluation.run.evaluate_guidance` with its (rho, s), getting one
+evaluation record per episode (columns of grits_lab/records.py). Running GRITS goes through
+`GritsEvaluator`; besides it, grits_lab.tune reads only the episode grid and the evaluation
+config's food library from the evaluation layer.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import pandas as pd
 from grits_lab.errors import ConfigError, InputError
 from grits_lab.evaluation.config import EvaluationConfig, load_evaluation_config
 from grits_lab.evaluation.methods import METHODS, check_method_checkpoints, method_checkpoints
-from grits_lab.evaluation.run import EpisodeKey, evaluate_guidance
+from grits_lab.evaluation.run import evaluate_guidance
 from grits_lab.runners.config import check_reachable, cluster_address
 from grits_lab.tune.config import StudyConfig
 
@@ -30,13 +31,12 @@ class GritsEvaluator:
     def __init__(self, config: StudyConfig) -> None:
         ref = config.evaluation
         assert ref.config is not None  # StudyConfig requires it for `evaluator: grits`
-        if not Path(ref.config).is_file():
-            raise InputError(f"evaluation config not found: {ref.config} (set `evaluation.config` in the sweep file)")
+        self._keys = config.episodes()  # InputError when the evaluation config is missing
         for path in ref.checkpoints:
             if not Path(path).is_file():
                 raise InputError(f"checkpoint not found: {path} (listed in `evaluation.checkpoints`; train it first)")
         self._evaluation = load_evaluation_config(ref.config)
-        self._keys = _validation_keys(config, self._evaluation, ref.method)
+        _check_against_evaluation(self._evaluation, ref.method)
         self._method = ref.method
 
     def __call__(self, rho: float, s: int, run_id: str) -> pd.DataFrame:
@@ -46,16 +46,9 @@ class GritsEvaluator:
         pass
 
 
-def _validation_keys(config: StudyConfig, evaluation: EvaluationConfig, method: str) -> list[EpisodeKey]:
-    """Before any study exists: the validation episodes are episodes of the evaluation config's
-    food library, the method's checkpoints fit together, and the Ray cluster it runs on answers.
-    Returns the validation episodes as evaluation keys."""
-    from grits_lab.sim.foods import load_foods
-
-    library = load_foods(evaluation.sim.foods_file)
-    config.validation.check_names(library)
+def _check_against_evaluation(evaluation: EvaluationConfig, method: str) -> None:
+    """Before any study exists: the method's checkpoints fit together and the Ray cluster it runs on answers."""
     if method not in METHODS:
         raise ConfigError(f"`evaluation.method` must be one of {', '.join(METHODS)}. Got {method!r}.")
     check_method_checkpoints(method, method_checkpoints(method, evaluation.checkpoints))
     check_reachable(cluster_address(evaluation.executor))
-    return [EpisodeKey(e.food, e.level, e.index, e.seed, library.get(e.food).split) for e in config.validation.episodes()]

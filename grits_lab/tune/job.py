@@ -47,7 +47,7 @@ def run_sweep(config: StudyConfig, n_trials: int | None = None, storage: str | N
         study = open_study(config, storage_obj)
         label = evaluator.label
         print(f"sweep {config.study_name}: {label}; storage {where}; "
-              f"{len(config.validation.episodes())} episodes per trial; study budget {config.n_trials} trials",
+              f"{len(config.episodes())} episodes per trial; study budget {config.n_trials} trials",
               file=sys.stderr)
         try:
             run_trials(config, study, storage_obj, evaluator, records_dir=out_dir / "records",

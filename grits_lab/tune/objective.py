@@ -14,8 +14,9 @@ from typing import Protocol
 import pandas as pd
 
 from grits_lab.errors import InputError
+from grits_lab.evaluation.grid import EpisodeKey
 from grits_lab.records import RECORD_COLUMNS
-from grits_lab.tune.config import ObjectiveConfig, StudyConfig, ValidationEpisode
+from grits_lab.tune.config import ObjectiveConfig, StudyConfig
 
 
 class EpisodeEvaluator(Protocol):
@@ -42,7 +43,7 @@ class TrialMetrics:
         return asdict(self)
 
 
-def check_records(records: pd.DataFrame, episodes: list[ValidationEpisode]) -> None:
+def check_records(records: pd.DataFrame, episodes: list[EpisodeKey]) -> None:
     """Raise InputError unless `records` holds exactly one row per validation episode, same seeds."""
     missing = [c for c in RECORD_COLUMNS if c not in records.columns]
     if missing:
@@ -82,7 +83,7 @@ def make_evaluator(config: StudyConfig) -> EpisodeEvaluator:
     if config.evaluator == "synthetic":
         from grits_lab.tune.synthetic import SyntheticEvaluator
 
-        return SyntheticEvaluator(config.validation.episodes(), config.synthetic, config.train_timesteps)
+        return SyntheticEvaluator(config.episodes(), config.synthetic, config.train_timesteps)
     from grits_lab.tune.grits_binding import GritsEvaluator
 
     return GritsEvaluator(config)

@@ -132,7 +132,7 @@ def write_outputs(study: optuna.Study, config: StudyConfig, out_dir: Path, stora
         "objective": config.objective.mode,
         "n_trials_budget": config.n_trials,
         "states": {s: int((frame["state"] == s).sum()) for s in sorted(frame["state"].unique())} if len(frame) else {},
-        "episodes_per_trial": len(config.validation.episodes()),
+        "episodes_per_trial": len(config.episodes()),
         "best": _metrics(best),
         "best_rule": how,
         "defaults": _metrics(defaults),

@@ -233,7 +233,7 @@ def run_trials(
 
     budget = n_trials if n_trials is not None else config.n_trials
     me = WorkerIdentity.current()
-    episodes = config.validation.episodes()
+    episodes = config.episodes()
     # The bar only where a terminal shows it; logs get one line per trial with the study's count.
     show_bar = progress and sys.stderr.isatty()
     bar = tqdm(total=budget, desc=f"sweep {config.study_name}", unit="trial", file=sys.stderr,

@@ -16,8 +16,9 @@ import time
 
 import pandas as pd
 
+from grits_lab.evaluation.grid import EpisodeKey
 from grits_lab.seeding import derive_seed, make_rng
-from grits_lab.tune.config import SyntheticConfig, ValidationEpisode
+from grits_lab.tune.config import SyntheticConfig
 
 # The evaluation's DDIM schedule (paper: 16 denoising steps over T = 100 training steps).
 _DDIM_STEPS = 16
@@ -44,7 +45,7 @@ class SyntheticEvaluator:
 
     label = "synthetic stand-in (not GRITS)"
 
-    def __init__(self, episodes: list[ValidationEpisode], config: SyntheticConfig, train_timesteps: int) -> None:
+    def __init__(self, episodes: list[EpisodeKey], config: SyntheticConfig, train_timesteps: int) -> None:
         self.episodes = episodes
         self.config = config
         self.train_timesteps = train_timesteps

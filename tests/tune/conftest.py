@@ -30,7 +30,7 @@ def sweep_file(tmp_path):
             "objective": {"mode": "single", "spillage_weight": 1.0},
             "sampler": {"name": "tpe", "seed": 3, "n_startup_trials": 3},
             "validation": {"foods": ["soybeans", "dried_jujube"], "levels": ["low", "high"], "trials": 2,
-                           "root_seed": 11},
+                           "seed": 11},
             "results_dir": str(tmp_path / "results"),
         }
         for key, value in overrides.items():

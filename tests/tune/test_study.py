@@ -153,12 +153,12 @@ def test_records_must_cover_exactly_the_validation_episodes(sweep_file):
     config = load_study_config(sweep_file())
     evaluator = make_evaluator(config)
     records = evaluator(2.5, 30, run_id="x")
-    check_records(records, config.validation.episodes())
+    check_records(records, config.episodes())
     with pytest.raises(InputError, match="differ from the validation set"):
-        check_records(records.iloc[1:], config.validation.episodes())
+        check_records(records.iloc[1:], config.episodes())
     shifted = records.assign(seed=records["seed"] + 1)
     with pytest.raises(InputError, match="differ from the validation set"):
-        check_records(shifted, config.validation.episodes())
+        check_records(shifted, config.episodes())
 
 
 def test_synthetic_stand_in_is_deterministic_and_guidance_trades_spillage_for_failures(sweep_file):

@@ -43,9 +43,55 @@ def test_invalid_sweep_files_are_rejected_naming_the_key(sweep_file, overrides, 
 
 
 def test_validation_episodes_have_seeds_derived_from_their_identity(sweep_file):
-    a = load_study_config(sweep_file()).validation.episodes()
-    b = load_study_config(sweep_file()).validation.episodes()
+    a = load_study_config(sweep_file()).episodes()
+    b = load_study_config(sweep_file()).episodes()
     assert a == b and len(a) == 2 * 2 * 2
     assert len({e.seed for e in a}) == len(a)
-    other = load_study_config(sweep_file(validation={"root_seed": 12})).validation.episodes()
+    other = load_study_config(sweep_file(validation={"seed": 12})).episodes()
     assert {e.seed for e in other}.isdisjoint({e.seed for e in a})
+
+
+@pytest.mark.parametrize("validation, key, name", [
+    ({"levels": ["low", "enormous"]}, "validation.levels", "enormous"),
+    ({"foods": ["soybeans", "unobtainium"]}, "validation.foods", "unobtainium"),
+])
+def test_a_validation_food_or_level_the_library_lacks_fails_at_load_naming_the_key(sweep_file, validation, key, name):
+    path = sweep_file(validation=validation)
+    with pytest.raises(ConfigError) as info:
+        load_study_config(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: `{key}`") and repr(name) in message and "\n" not in message
+
+
+def test_the_validation_block_is_checked_by_the_evaluations_episode_grid(sweep_file):
+    from grits_lab.evaluation.grid import EpisodeGrid
+
+    config = load_study_config(sweep_file())
+    assert isinstance(config.validation, EpisodeGrid)
+    for validation, key in [({"trials": 0}, "validation.trials"), ({"levels": ["low", "low"]}, "validation.levels"),
+                            ({"foods": []}, "validation.foods"), ({"root_seed": 3}, "validation.root_seed")]:
+        with pytest.raises(ConfigError, match=f"`{key}`"):
+            load_study_config(sweep_file(validation=validation))
+
+
+# Digests of [[food, level, trial, seed], ...] and study identities before the validation block
+# became an episode grid: its episodes, their seeds and existing studies must not change.
+SHIPPED_EPISODES = {
+    "grits_cpu": (20, "5d2806b57e171b49", "25d72b44589cfd3d"),
+    "grits_paper": (50, "48430c570614e2a0", "33355baaa34cf9b4"),
+    "grits_quick": (12, "1c0af4685854e532", "db395eec8b9a3536"),
+    "synthetic_standin": (24, "b9291626d2bf9833", "2d9396727413733a"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(SHIPPED_EPISODES))
+def test_shipped_sweeps_keep_their_episodes_seeds_and_study_identity(name):
+    import hashlib
+    import json
+
+    config = load_study_config(REPO / "sweeps" / f"{name}.yaml")
+    rows = [[e.food, e.level, e.trial, e.seed] for e in config.episodes()]
+    count, digest, identity = SHIPPED_EPISODES[name]
+    assert len(rows) == count
+    assert hashlib.sha256(json.dumps(rows).encode()).hexdigest()[:16] == digest
+    assert config.identity() == identity
