@@ -25,26 +25,7 @@ from grits_lab.runners.config import ExecutorConfig
 from grits_lab.runners.spec import EpisodeSpec
 from grits_lab.seeding import derive_seed, make_rng
 from grits_lab.sim.config import SimConfig
-
-SHAPES = ["sphere", "cube", "cone", "cylinder"]
-
-
-@dataclass
-class ParticleRanges:
-    # After the authors' generator (radius / half length 2.5-10 mm, mass 0.1-5 g, friction 0-1),
-    # in the coarse-grained world of foods.yaml (grains from 4.5 mm), with an amount drawn as a
-    # fill height of the source bowl (see grits_lab.sim.foods.primitive_food).
-    radius: tuple[float, float] = (0.0045, 0.010)
-    mass: tuple[float, float] = (0.0001, 0.005)
-    friction: tuple[float, float] = (0.0, 1.0)
-    fill_height: tuple[float, float] = (0.012, 0.032)
-
-    def __post_init__(self) -> None:
-        for key in ("radius", "mass", "friction", "fill_height"):
-            lo, hi = getattr(self, key)
-            require(0 <= lo <= hi, f"particles.{key}", [lo, hi], "a range [low, high] with 0 <= low <= high")
-        require(self.radius[0] >= 0.0015, "particles.radius", list(self.radius), "a range starting at >= 0.0015 m")
-        require(0.002 <= self.fill_height[0] and self.fill_height[1] <= 0.055, "particles.fill_height", list(self.fill_height), "within [0.002, 0.055] metres")
+from grits_lab.sim.foods import SHAPES, ParticleRanges, primitive_food
 
 
 @dataclass
@@ -127,7 +108,7 @@ class SpillageConfig:
     def __post_init__(self) -> None:
         require(self.trials >= 1, "trials", self.trials, "at least 1")
         require(0 <= self.spill_fraction <= 1, "spill_fraction", self.spill_fraction, "in [0, 1]")
-        require(len(self.shapes) >= 1 and set(self.shapes) <= set(SHAPES), "shapes", self.shapes, f"a non-empty subset of {SHAPES}")
+        require(len(self.shapes) >= 1 and set(self.shapes) <= set(SHAPES), "shapes", self.shapes, f"a non-empty subset of {list(SHAPES)}")
         require(self.trials % len(self.shapes) == 0, "trials", self.trials, f"a multiple of the number of shapes ({len(self.shapes)})")
         require(self.chunk_len >= 1, "chunk_len", self.chunk_len, "at least 1")
         require(self.base_expert_plans >= 0, "base_expert_plans", self.base_expert_plans, "non-negative")
@@ -387,16 +368,11 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
     from grits_lab.config import config_fingerprint
     from grits_lab.perception.scene import builder_for_env, scene_clouds
     from grits_lab.sim.env import worker_env
-    from grits_lab.sim.foods import primitive_food
 
     p: SpillageTrialParams = spec.params["trial"]
     env = worker_env(context, p.sim)
     builder = context.cached(("cloud-builder", config_fingerprint(p.cloud)), lambda: builder_for_env(p.cloud, env))
-    pr = p.particles
-    food, count = primitive_food(
-        p.shape, make_rng(derive_seed(spec.seed, "food")), radius=tuple(pr.radius), mass=tuple(pr.mass),
-        friction=tuple(pr.friction), fill_height=tuple(pr.fill_height),
-    )
+    food, count = primitive_food(p.shape, make_rng(derive_seed(spec.seed, "food")), p.particles)
     obs, info = env.reset(seed=spec.seed, options={"food_spec": food, "n_particles": count})
     spilled_before = int(info["spilled"])
     trajectory = np.asarray(spec.trajectory, dtype=np.float32)

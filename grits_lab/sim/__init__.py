@@ -15,7 +15,7 @@ __getattr__, __dir__, __all__ = lazy_exports(__name__, {
     "env": ["SceneGeometry", "ScoopEnv", "matrix_to_pose9", "pose9_to_matrix"],
     "episode": ["EpisodeRecord", "load_trajectory", "play_trajectory", "run_episode", "validate_trajectory"],
     "expert": ["expert_trajectory", "nominal_expert_trajectory"],
-    "foods": ["FoodLibrary", "FoodSpec", "ParticleComponent", "load_foods", "primitive_food"],
+    "foods": ["FoodLibrary", "FoodSpec", "ParticleComponent", "ParticleRanges", "load_foods", "primitive_food"],
     "gym_env": ["ENV_ID", "ScoopGymEnv"],
 })
 

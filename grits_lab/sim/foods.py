@@ -23,7 +23,7 @@ from typing import Literal
 
 import numpy as np
 
-from grits_lab.config import config_from_dict, load_yaml
+from grits_lab.config import config_from_dict, load_yaml, require
 from grits_lab.errors import ConfigError, InputError
 from grits_lab.sim.shapes import BowlGeometry
 
@@ -304,29 +304,45 @@ def sample_particles(food: FoodSpec, count: int, rng: np.random.Generator) -> li
     return [p for p in out if p.count > 0]
 
 
-def primitive_food(
-    shape: str,
-    rng: np.random.Generator,
-    radius: Range = (0.0045, 0.010),
-    mass: Range = (0.0001, 0.005),
-    friction: Range = (0.0, 1.0),
-    fill_height: Range = (0.012, 0.032),
-) -> tuple[FoodSpec, int]:
+@dataclass
+class ParticleRanges:
+    """Where `primitive_food` draws a random food's parameters: each a range [low, high].
+
+    After the authors' generator (radius / half length 2.5-10 mm, mass 0.1-5 g, friction 0-1), in
+    the coarse-grained world of `foods.yaml` (grains from 4.5 mm), with an amount drawn as a fill
+    height of the source bowl. The spillage dataset's `particles` block
+    (grits_lab/collection/spillage_trials.py).
+    """
+
+    radius: Range = (0.0045, 0.010)  # m, radius and half length
+    mass: Range = (0.0001, 0.005)  # kg
+    friction: Range = (0.0, 1.0)  # lateral friction coefficient
+    fill_height: Range = (0.012, 0.032)  # m above the source bowl's inner floor
+
+    def __post_init__(self) -> None:
+        for key in ("radius", "mass", "friction", "fill_height"):
+            lo, hi = getattr(self, key)
+            require(0 <= lo <= hi, key, [lo, hi], "a range [low, high] with 0 <= low <= high")
+        require(self.radius[0] >= 0.0015, "radius", list(self.radius), "a range starting at >= 0.0015 m")
+        require(0.002 <= self.fill_height[0] and self.fill_height[1] <= 0.055, "fill_height", list(self.fill_height), "within [0.002, 0.055] metres")
+
+
+def primitive_food(shape: str, rng: np.random.Generator, ranges: ParticleRanges | None = None) -> tuple[FoodSpec, int]:
     """A random single-shape food for the spillage dataset, after the authors' generator.
 
-    Radius / half length uniform in `radius` (m; the authors draw 2.5-10 mm, the coarse-grained
-    world of `foods.yaml` starts at 4.5 mm), mass in `mass` (kg), friction in `friction`, and an
-    amount given as a fill height of the source bowl drawn uniformly in `fill_height` (m). Ranges
-    collapse to the drawn value, so the episode's particles share one parameter set. Returns the
-    FoodSpec (one level, "trial") and its particle count.
+    Radius / half length, mass (kg), friction and an amount given as a fill height of the source
+    bowl (m) are drawn uniformly in `ranges` (default `ParticleRanges()`). Ranges collapse to the
+    drawn value, so the episode's particles share one parameter set. Returns the FoodSpec (one
+    level, "trial") and its particle count.
     """
     if shape not in SHAPES:
         raise InputError(f"unknown particle shape {shape!r}; shapes: {', '.join(SHAPES)}")
-    r = float(rng.uniform(*radius))
-    hl = float(rng.uniform(*radius)) if shape in ("cone", "cylinder") else r
-    m = float(rng.uniform(*mass))
-    mu = float(rng.uniform(*friction))
-    height = float(rng.uniform(*fill_height))
+    ranges = ranges or ParticleRanges()
+    r = float(rng.uniform(*ranges.radius))
+    hl = float(rng.uniform(*ranges.radius)) if shape in ("cone", "cylinder") else r
+    m = float(rng.uniform(*ranges.mass))
+    mu = float(rng.uniform(*ranges.friction))
+    height = float(rng.uniform(*ranges.fill_height))
     comp = ParticleComponent(
         shape=shape,  # type: ignore[arg-type]
         radius=(r, r),

@@ -16,11 +16,12 @@ import torch
 from torch import nn
 
 from grits_lab.errors import InputError, StorageError
+from grits_lab.perception.composite import CLOUD_OBJECTS
 from grits_lab.spillage.config import PredictorModelConfig
 from grits_lab.spillage.encoders import DP3Encoder, PointNet2Encoder
 
-N_OBJECTS = 3  # len(grits_lab.perception.composite.CLOUD_OBJECTS)
-BOWL = 2  # index of the source bowl in CLOUD_OBJECTS
+N_OBJECTS = len(CLOUD_OBJECTS)  # objects of the composite cloud (food, spoon, bowl)
+BOWL = CLOUD_OBJECTS.index("bowl")  # the source bowl's index in the cloud
 
 
 class CloudNormalizer:

@@ -67,7 +67,7 @@ def test_spillage_trial_clouds_have_n_points_where_the_objects_are(tmp_path):
     from grits_lab.collection.jobs import base_trajectory
     from grits_lab.seeding import derive_seed, make_rng
     from grits_lab.sim.env import worker_env
-    from grits_lab.sim.foods import fill_count, primitive_food
+    from grits_lab.sim.foods import ParticleRanges, fill_count, primitive_food
     from grits_lab.collection.spillage_trials import make_trial_spec, source_bowl_region
 
     config = _short_spillage_config(tmp_path)
@@ -86,7 +86,7 @@ def test_spillage_trial_clouds_have_n_points_where_the_objects_are(tmp_path):
     for key in ("chunk_cloud", "chunk_cloud_raw"):
         assert arrays[key].shape == (c, 3, 200, 3) and arrays[key].dtype == np.float16
     assert meta["label"] == int(arrays["chunk_spilled"].any())
-    food, count = primitive_food("sphere", make_rng(derive_seed(spec.seed, "food")), radius=(0.004, 0.006), fill_height=(0.005, 0.005))
+    food, count = primitive_food("sphere", make_rng(derive_seed(spec.seed, "food")), ParticleRanges(radius=(0.004, 0.006), fill_height=(0.005, 0.005)))
     assert meta["n_particles"] == count == fill_count(food, 0.005)
     # the first cloud is taken before any motion: the food is in the source bowl
     first = arrays["chunk_cloud"][0].astype(np.float64)

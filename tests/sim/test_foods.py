@@ -128,3 +128,19 @@ def test_a_level_must_be_exactly_one_amount(tmp_path):
         load_foods(_write(tmp_path, GOOD.replace("MASS_LO", "0.0005").replace("{pieces: 10}", "{pieces: 10, fill_height: 0.01}")))
     with pytest.raises(ConfigError, match="coarse_grain"):
         load_foods(_write(tmp_path, GOOD.replace("MASS_LO", "0.0005").replace("        mass:", "        coarse_grain: 0.5\n        mass:")))
+
+
+def test_the_spillage_dataset_draws_its_foods_from_the_one_particle_range_definition():
+    from grits_lab.config import config_from_dict
+    from grits_lab.collection.spillage_trials import SpillageConfig
+    from grits_lab.errors import ConfigError
+    from grits_lab.sim.foods import ParticleRanges
+
+    config = SpillageConfig()
+    assert type(config.particles) is ParticleRanges and config.particles == ParticleRanges()
+    assert config.shapes == list(SHAPES)
+    a, _ = primitive_food("cone", np.random.default_rng(4))
+    b, _ = primitive_food("cone", np.random.default_rng(4), config.particles)
+    assert a == b
+    with pytest.raises(ConfigError, match=r"`particles.radius` must be a range starting at >= 0.0015 m"):
+        config_from_dict(SpillageConfig, {"particles": {"radius": [0.001, 0.01]}})

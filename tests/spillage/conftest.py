@@ -10,9 +10,9 @@ import yaml
 
 from grits_lab.data.format import MANIFEST_FILE, rebuild_index, write_episode
 from grits_lab.geometry import matrix_to_rot6d
+from grits_lab.sim.foods import SHAPES
 
 BOWL_CENTRE = np.array([0.5, 0.0, 0.05])
-SHAPES = ("sphere", "cube", "cone", "cylinder")
 
 
 def write_tiny_spillage_dataset(root: Path, n_episodes: int = 12, n_points: int = 48, n_chunks: int = 3, seed: int = 0, chunk_len: int = 12) -> Path:

@@ -10,6 +10,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from grits_lab.perception.composite import CLOUD_OBJECTS
 from grits_lab.policies.diffusion.configuration_diffusion import ObsEncoderConfig
 
 
@@ -21,7 +22,7 @@ class PointCloudEncoder(nn.Module):
     the output. Output (B, feature_dim).
     """
 
-    def __init__(self, config: ObsEncoderConfig, n_objects: int = 3) -> None:
+    def __init__(self, config: ObsEncoderConfig, n_objects: int = len(CLOUD_OBJECTS)) -> None:
         super().__init__()
         layers: list[nn.Module] = []
         width = 3 + n_objects
