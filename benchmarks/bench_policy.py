@@ -56,7 +56,7 @@ def make_objective(policy: DiffusionPolicy, cloud: torch.Tensor, device: torch.d
     from grits_lab.spillage.config import PredictorModelConfig
     from grits_lab.spillage.model import SpillagePredictor
 
-    predictor = SpillagePredictor(PredictorModelConfig(chunk_len=policy.config.n_action_steps)).to(device).eval()
+    predictor = SpillagePredictor(PredictorModelConfig(n_action_steps=policy.config.n_action_steps)).to(device).eval()
     with torch.no_grad():
         embedding = predictor.encode_cloud(cloud)
     start, n = policy.config.action_start, policy.config.n_action_steps

@@ -94,18 +94,28 @@ def test_a_misspelled_sim_key_in_a_shipped_stage_config_fails_at_load_naming_it(
     assert f"unknown key `{block}.time_stpe`" in str(info.value)
 
 
-def test_collection_identities_keep_the_fingerprints_of_stored_datasets():
-    """A typed sim block leaves the identity of a default sim as it was (`sim: {}`), so datasets
-    collected before keep matching their config and resume instead of being refused."""
-    from grits_lab.config import config_fingerprint
+def test_datasets_collected_before_are_still_recognized_by_their_config(tmp_path):
+    """Fingerprints stored by datasets collected before the sim block was typed (`sim: {}`) and the
+    chunk length took the policy's name (`chunk_len`): each dataset still matches its config and
+    resumes instead of being refused; a dataset of another config is still refused."""
+    import yaml
+
+    from grits_lab.collection.driver import existing_manifest
     from grits_lab.collection.jobs import load_collect_config
+    from grits_lab.data.format import MANIFEST_FILE
+    from grits_lab.errors import StorageError
 
     stored = {"demos.yaml": "44337bd0841efe53", "demos_cpu.yaml": "66784ff117cfd6ad", "demos_quick.yaml": "deaee82b43f607c7",
               "spillage.yaml": "e6847f2aed697ab6", "spillage_cpu.yaml": "e572800d4c39c388", "spillage_quick.yaml": "4e44dd76c6349ce0"}
     for name, fingerprint in stored.items():
         config = load_collect_config(ROOT / "experiments" / name)
         assert config.identity()["sim"] == {}
-        assert config_fingerprint(config.identity()) == fingerprint, name
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / MANIFEST_FILE).write_text(yaml.safe_dump({"kind": config.kind, "fingerprint": fingerprint}))
+        assert existing_manifest(folder, config.kind, config.identity())["fingerprint"] == fingerprint
+    with pytest.raises(StorageError, match="different config"):
+        existing_manifest(tmp_path / "spillage_cpu.yaml", "spillage", load_collect_config(ROOT / "experiments" / "spillage_quick.yaml").identity())
 
 
 def test_an_evaluation_config_with_a_sim_override_round_trips_through_its_yaml_form():

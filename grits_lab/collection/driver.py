@@ -20,10 +20,12 @@ import yaml
 from grits_lab.config import config_changes, config_fingerprint, config_to_dict
 from grits_lab.data.format import (
     FORMAT_VERSION,
+    LEGACY_CHUNK_KEY,
     MANIFEST_FILE,
     list_episode_files,
     rebuild_index,
     verify_episode,
+    with_chunk_key,
     write_episode,
 )
 from grits_lab.errors import StorageError
@@ -74,7 +76,8 @@ def existing_manifest(out_dir: str | Path, kind: str, identity: Any) -> dict[str
     except yaml.YAMLError as exc:
         raise StorageError(f"unreadable manifest {manifest_path}: {exc}") from None
     fingerprint = config_fingerprint(identity)
-    if manifest.get("fingerprint") != fingerprint or manifest.get("kind") != kind:
+    stored_as = {fingerprint, config_fingerprint(with_chunk_key(identity, LEGACY_CHUNK_KEY))}  # either name of the chunk length
+    if manifest.get("fingerprint") not in stored_as or manifest.get("kind") != kind:
         raise StorageError(
             f"{out_dir} holds a {manifest.get('kind')} dataset made with a different config "
             f"(fingerprint {manifest.get('fingerprint')} vs {fingerprint}); choose another output or remove it"

@@ -3,7 +3,8 @@
 A candidate trial (shape, k) draws its particle parameters, its trajectory shift, the speed of its
 exit from the bowl and how far the spoon rolls once outside it from its own seed, runs the base
 scoop followed by the lift-and-exit (food falling off the spoon outside the bowl is spillage, as
-on the way to a transfer), and records the spilled count at every waypoint. The trajectory is cut into chunks of `chunk_len` waypoints (the policy's n_action_steps); each chunk stores the composite
+on the way to a transfer), and records the spilled count at every waypoint. The trajectory is
+cut into chunks of `n_action_steps` waypoints (the policy's); each chunk stores the composite
 and raw clouds observed at its start and whether the spilled count rose during it (contract 4).
 The label is 1 if any chunk spilled. Candidates are accepted in index order per shape until every
 (shape, label) bucket is full (`grits_lab.collection.balance`); the acceptance rate is reported.
@@ -88,7 +89,7 @@ class SpillageConfig:
     trials: int = 4000
     spill_fraction: float = 0.5
     shapes: list[str] = field(default_factory=lambda: list(SHAPES))
-    chunk_len: int = 12
+    n_action_steps: int = 12  # waypoints per chunk: the policy's n_action_steps (authors' code: 12)
     # Base trajectory: a (T, 9)/(T, 7) .npy file or a demonstrations dataset directory (the mean
     # of its `action`s); null = the scripted expert: its nominal (unrandomized) scoop when
     # base_expert_plans is 0, else the time-normalized mean of that many randomized expert plans.
@@ -110,7 +111,7 @@ class SpillageConfig:
         require(0 <= self.spill_fraction <= 1, "spill_fraction", self.spill_fraction, "in [0, 1]")
         require(len(self.shapes) >= 1 and set(self.shapes) <= set(SHAPES), "shapes", self.shapes, f"a non-empty subset of {list(SHAPES)}")
         require(self.trials % len(self.shapes) == 0, "trials", self.trials, f"a multiple of the number of shapes ({len(self.shapes)})")
-        require(self.chunk_len >= 1, "chunk_len", self.chunk_len, "at least 1")
+        require(self.n_action_steps >= 1, "n_action_steps", self.n_action_steps, "at least 1")
         require(self.base_expert_plans >= 0, "base_expert_plans", self.base_expert_plans, "non-negative")
         require(self.max_candidates_factor >= 1, "max_candidates_factor", self.max_candidates_factor, "at least 1")
 
@@ -135,7 +136,7 @@ class SpillageTrialParams:
     cloud: CloudConfig
     particles: ParticleRanges
     shape: str
-    chunk_len: int
+    n_action_steps: int
     raw_cloud: bool
     shift: list[float]
     shift_scale: float
@@ -151,15 +152,15 @@ def candidate_id(shape: str, index: int) -> str:
     return f"{shape}-{index:06d}"
 
 
-def chunk_labels(spilled_over_time: np.ndarray, chunk_len: int, spilled_before: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def chunk_labels(spilled_over_time: np.ndarray, n_action_steps: int, spilled_before: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """(chunk_start (C,), chunk_spilled (C,)) from the spilled count after each waypoint (T,).
 
     A chunk spilled if the count at its end exceeds the count just before its first waypoint.
     """
     counts = np.asarray(spilled_over_time, dtype=np.int64)
-    starts = np.arange(0, len(counts), chunk_len, dtype=np.int32)
+    starts = np.arange(0, len(counts), n_action_steps, dtype=np.int32)
     before = np.concatenate([[spilled_before], counts])
-    ends = np.minimum(starts + chunk_len, len(counts))
+    ends = np.minimum(starts + n_action_steps, len(counts))
     return starts, before[ends] > before[starts]
 
 
@@ -217,7 +218,7 @@ def make_trial_spec(config: SpillageConfig, base: np.ndarray, bowl: dict[str, An
         clearance=s.clearance, ramp_steps=s.ramp_steps,
     )
     params = SpillageTrialParams(
-        sim=config.sim, cloud=config.cloud, particles=config.particles, shape=shape, chunk_len=config.chunk_len,
+        sim=config.sim, cloud=config.cloud, particles=config.particles, shape=shape, n_action_steps=config.n_action_steps,
         raw_cloud=config.raw_cloud, shift=[float(v) for v in shift], shift_scale=float(scale), exit_speed=exit_speed,
         exit_tilt_deg=exit_tilt,
     )
@@ -378,7 +379,7 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
     trajectory = np.asarray(spec.trajectory, dtype=np.float32)
     spilled, clouds, clouds_raw, visible = [], [], [], []
     for t, action in enumerate(trajectory):
-        if t % p.chunk_len == 0:
+        if t % p.n_action_steps == 0:
             c = scene_clouds(builder, env, seed=derive_seed(spec.seed, "cloud", t), raw=p.raw_cloud)
             clouds.append(c["cloud"].astype(np.float16))
             if p.raw_cloud:
@@ -389,7 +390,7 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         if terminated or truncated:
             break
     trajectory = trajectory[: len(spilled)]
-    chunk_start, chunk_spilled = chunk_labels(np.asarray(spilled), p.chunk_len, spilled_before)
+    chunk_start, chunk_spilled = chunk_labels(np.asarray(spilled), p.n_action_steps, spilled_before)
     metrics = env.metrics()
     component = env.particle_parameters()[0] if count else {}
     arrays = {
@@ -410,7 +411,7 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "scooped": int(metrics["scooped"]),
         "scoop_success": bool(metrics["scoop_success"]),
         "ik_failures": int(metrics["ik_failures"]),
-        "chunk_len": p.chunk_len,
+        "n_action_steps": p.n_action_steps,
         "steps": int(len(spilled)),
         "shift_x": p.shift[0],
         "shift_y": p.shift[1],

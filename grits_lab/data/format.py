@@ -29,6 +29,16 @@ FORMAT_VERSION = 1
 MANIFEST_FILE = "dataset.yaml"
 INDEX_FILE = "index.parquet"
 EPISODE_DIR = "episodes"
+# A spillage dataset's chunk length is the policy's `n_action_steps`; data written before it took
+# that name (collection configs, manifests, episode meta, predictor checkpoints) call it
+# `chunk_len`. Readers accept either (`with_chunk_key`).
+CHUNK_KEY, LEGACY_CHUNK_KEY = "n_action_steps", "chunk_len"
+
+
+def with_chunk_key(mapping: dict[str, Any], key: str = CHUNK_KEY) -> dict[str, Any]:
+    """`mapping` with its chunk length, stored under either name, under `key`: CHUNK_KEY to read
+    stored data, LEGACY_CHUNK_KEY for the fingerprint that data stored under the old name carries."""
+    return {(key if k in (CHUNK_KEY, LEGACY_CHUNK_KEY) else k): v for k, v in mapping.items()}
 
 
 def episode_path(dataset_dir: str | Path, episode_id: str) -> Path:

@@ -119,23 +119,23 @@ def run_scoop(env: Any, controller: Any, scene: EpisodeScene, history: ObsHistor
     }
 
 
-def rollout_chunk_episode(chunks: dict[str, Any], chunk_len: int, meta: dict[str, Any]) -> dict[str, Any] | None:
+def rollout_chunk_episode(chunks: dict[str, Any], n_action_steps: int, meta: dict[str, Any]) -> dict[str, Any] | None:
     """A policy rollout's scoop as a spillage-dataset episode (docs/datasets.md, contract 4), or None.
 
     Arrays: trajectory (T, 9) executed actions; chunk_start (C,) int32; chunk_cloud (C, 3, N, 3)
     float16, the composite cloud when the chunk started; chunk_spilled (C,) bool, whether the
-    spilled count rose while the chunk's `chunk_len` actions ran. Only whole chunks are kept (the
-    predictor judges `chunk_len` actions); labels come from the simulation's particle states.
+    spilled count rose while the chunk's `n_action_steps` actions ran. Only whole chunks are kept
+    (the predictor judges `n_action_steps` actions); labels come from the simulation's particle states.
     """
     actions = np.asarray(chunks["actions"], dtype=np.float32).reshape(-1, 9)
     spilled = np.asarray(chunks["spilled_over_time"], dtype=np.int64)
     starts, clouds, labels = [], [], []
     for start, cloud, before in chunks["log"]:
-        if start + chunk_len > len(actions):
+        if start + n_action_steps > len(actions):
             continue
         starts.append(start)
         clouds.append(np.asarray(cloud, dtype=np.float16))
-        labels.append(bool(spilled[start + chunk_len - 1] > before))
+        labels.append(bool(spilled[start + n_action_steps - 1] > before))
     if not starts:
         return None
     arrays = {
@@ -145,7 +145,7 @@ def rollout_chunk_episode(chunks: dict[str, Any], chunk_len: int, meta: dict[str
         "chunk_spilled": np.asarray(labels, dtype=bool),
         "spilled_over_time": spilled[: len(actions)].astype(np.int32),
     }
-    return {"arrays": arrays, "meta": {**meta, "label": int(any(labels)), "chunk_len": int(chunk_len),
+    return {"arrays": arrays, "meta": {**meta, "label": int(any(labels)), "n_action_steps": int(n_action_steps),
                                        "steps": int(len(actions)), "n_chunks": len(starts)}}
 
 

@@ -142,17 +142,20 @@ def check_method_checkpoints(name: str, paths: dict[str, str]) -> None:
     spec = METHODS[name]
     if spec.predictor is None:
         return
+    from grits_lab.data.format import CHUNK_KEY, with_chunk_key
     from grits_lab.spillage.checkpoint import read_checkpoint
+    from grits_lab.spillage.config import PredictorModelConfig
 
     try:
-        chunk_len = int(read_checkpoint(paths[spec.predictor])["config"]["model"]["chunk_len"])
+        stored = with_chunk_key(read_checkpoint(paths[spec.predictor])["config"]["model"])  # either name of the key
+        chunk = int(stored.get(CHUNK_KEY, PredictorModelConfig.n_action_steps))  # the default, for a config stored without it
     except StorageError:
         raise ConfigError(f"`checkpoints.{spec.predictor}` is not a spillage predictor checkpoint: {paths[spec.predictor]}") from None
-    except (KeyError, TypeError, ValueError):
-        chunk_len = 12  # PredictorConfig's default, for a config stored without the key
-    if n_action_steps is not None and chunk_len != n_action_steps:
+    except (KeyError, TypeError, ValueError, AttributeError):
+        chunk = PredictorModelConfig.n_action_steps
+    if n_action_steps is not None and chunk != n_action_steps:
         raise ConfigError(
-            f"`checkpoints.{spec.predictor}` judges chunks of {chunk_len} actions, but the policy of "
+            f"`checkpoints.{spec.predictor}` judges chunks of {chunk} actions, but the policy of "
             f"`checkpoints.policy` executes {n_action_steps} (n_action_steps); train the predictor with "
-            f"`model.chunk_len: {n_action_steps}` on a dataset collected with `chunk_len: {n_action_steps}`"
+            f"`model.n_action_steps: {n_action_steps}` on a dataset collected with `n_action_steps: {n_action_steps}`"
         )

@@ -139,7 +139,7 @@ def write_rollout_chunks(out: Path, record: dict[str, Any], episode: dict[str, A
         write_text_atomic(dataset / MANIFEST_FILE, yaml.safe_dump({
             "kind": "spillage", "format_version": 1, "status": "complete", "source": "policy rollouts",
             "run_id": record.get("run_id"), "method": record["method"],
-            "config": {"chunk_len": int(episode["meta"]["chunk_len"])},
+            "config": {"n_action_steps": int(episode["meta"]["n_action_steps"])},
         }, sort_keys=False))
     episode_id = f"{record['method']}-{record['food']}-{record['level']}-{int(record['trial'])}"
     meta = {**episode["meta"], "method": record["method"], "trial": int(record["trial"])}

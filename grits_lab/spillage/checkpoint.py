@@ -15,6 +15,7 @@ import numpy as np
 import torch
 
 from grits_lab.config import config_from_dict, config_to_dict
+from grits_lab.data.format import with_chunk_key
 from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import ConfigError, StorageError
 from grits_lab.spillage.config import PredictorConfig
@@ -73,11 +74,18 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     return payload
 
 
+def _stored_config(config: Any) -> Any:
+    """A checkpoint's stored config, with `model.chunk_len` of earlier checkpoints read as `model.n_action_steps`."""
+    if isinstance(config, dict) and isinstance(config.get("model"), dict):
+        return {**config, "model": with_chunk_key(config["model"])}
+    return config
+
+
 def load_predictor(path: str | Path, for_inference: bool = True) -> TrainedPredictor:
     """Rebuild a trained predictor; `for_inference` puts it in eval mode with frozen weights."""
     payload = read_checkpoint(path)
     try:
-        config = config_from_dict(PredictorConfig, payload["config"])
+        config = config_from_dict(PredictorConfig, _stored_config(payload["config"]))
     except ConfigError as exc:
         raise StorageError(f"{path}: stored config is invalid: {exc}") from None
     model = SpillagePredictor(config.model)

@@ -67,7 +67,7 @@ def predict_all(checkpoints: dict[str, Path], dataset_dir: str | Path) -> pd.Dat
         if merged is None:
             merged = frame
         elif not merged[["episode", "chunk", "label"]].equals(frame[["episode", "chunk", "label"]]):
-            raise InputError(f"predictor {name!r} saw different chunks of {dataset_dir} than the others (chunk_len differs?)")
+            raise InputError(f"predictor {name!r} saw different chunks of {dataset_dir} than the others (model.n_action_steps differs?)")
         else:
             merged[f"p_{name}"] = frame[f"p_{name}"].to_numpy()
     assert merged is not None

@@ -83,7 +83,7 @@ class PointNet2EncoderConfig:
 class PredictorModelConfig:
     encoder: Encoder = "dp3"
     inputs: Inputs = "trajectory_and_cloud"
-    chunk_len: int = 12  # the policy's n_action_steps
+    n_action_steps: int = 12  # waypoints of a judged chunk: the policy's n_action_steps
     action_dim: int = 9
     waypoint_mlp: tuple[int, ...] = (16, 32)
     fusion_mlp: tuple[int, ...] = (256, 32)
@@ -92,7 +92,7 @@ class PredictorModelConfig:
     pointnet2: PointNet2EncoderConfig = field(default_factory=PointNet2EncoderConfig)
 
     def __post_init__(self) -> None:
-        require(self.chunk_len > 0, "model.chunk_len", self.chunk_len, "positive")
+        require(self.n_action_steps > 0, "model.n_action_steps", self.n_action_steps, "positive")
         require(self.action_dim == 9, "model.action_dim", self.action_dim, "9 (xyz + 6-D rotation)")
         require(len(self.waypoint_mlp) >= 1 and all(d > 0 for d in self.waypoint_mlp), "model.waypoint_mlp", self.waypoint_mlp, "positive integers")
         require(len(self.fusion_mlp) >= 1 and all(d > 0 for d in self.fusion_mlp), "model.fusion_mlp", self.fusion_mlp, "positive integers")

@@ -18,7 +18,16 @@ import torch
 from torch.utils.data import IterableDataset
 
 from grits_lab.config import load_yaml
-from grits_lab.data.format import EPISODE_DIR, MANIFEST_FILE, load_index, read_episode, require_finite
+from grits_lab.data.format import (
+    CHUNK_KEY,
+    EPISODE_DIR,
+    LEGACY_CHUNK_KEY,
+    MANIFEST_FILE,
+    load_index,
+    read_episode,
+    require_finite,
+    with_chunk_key,
+)
 from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import ConfigError, InputError, StorageError
 from grits_lab.seeding import derive_seed, make_rng
@@ -36,9 +45,10 @@ class EpisodeSplit:
     val: list[str]
 
 
-def check_spillage_dataset(dataset_dir: str | Path, chunk_len: int | None = None, key: str = "model.chunk_len") -> Any:
+def check_spillage_dataset(dataset_dir: str | Path, n_action_steps: int | None = None, key: str = "model.n_action_steps") -> Any:
     """The dataset's index (DataFrame) after checking that it exists, is of kind "spillage" and,
-    given `chunk_len`, that its labels judge chunks of that many actions (ConfigError naming `key`)."""
+    given `n_action_steps`, that its labels judge chunks of that many actions (ConfigError naming `key`).
+    Datasets collected before the key took the policy's name record it as `chunk_len`."""
     dataset_dir = Path(dataset_dir)
     if not (dataset_dir / EPISODE_DIR).is_dir():
         raise StorageError(f"no spillage dataset at {dataset_dir} (missing {EPISODE_DIR}/); collect one first")
@@ -51,14 +61,15 @@ def check_spillage_dataset(dataset_dir: str | Path, chunk_len: int | None = None
     index = load_index(dataset_dir)
     if len(index) == 0:
         raise StorageError(f"the spillage dataset at {dataset_dir} holds no episodes")
-    if chunk_len is not None:
-        collected = set(map(int, index["chunk_len"].unique())) if "chunk_len" in index.columns else set()
-        if not collected and isinstance(manifest.get("config"), dict) and "chunk_len" in manifest["config"]:
-            collected = {int(manifest["config"]["chunk_len"])}
-        if collected and collected != {chunk_len}:
+    if n_action_steps is not None:
+        collected = {int(v) for name in (CHUNK_KEY, LEGACY_CHUNK_KEY) if name in index.columns for v in index[name].dropna().unique()}
+        stored = with_chunk_key(manifest["config"]) if isinstance(manifest.get("config"), dict) else {}
+        if not collected and CHUNK_KEY in stored:
+            collected = {int(stored[CHUNK_KEY])}
+        if collected and collected != {n_action_steps}:
             raise ConfigError(
-                f"`{key}` is {chunk_len}, but the spillage dataset at {dataset_dir} was collected with "
-                f"chunk_len {', '.join(map(str, sorted(collected)))}: its labels judge chunks of that many actions"
+                f"`{key}` is {n_action_steps}, but the spillage dataset at {dataset_dir} was collected with "
+                f"n_action_steps {', '.join(map(str, sorted(collected)))}: its labels judge chunks of that many actions"
             )
     return index
 
@@ -151,7 +162,7 @@ class SpillageChunkDataset(IterableDataset):
         files: list[str],
         *,
         cloud_key: str,
-        chunk_len: int,
+        n_action_steps: int,
         action_normalizer: ActionNormalizer,
         cloud_normalizer: CloudNormalizer,
         points_per_object: int | None,
@@ -163,7 +174,7 @@ class SpillageChunkDataset(IterableDataset):
         self.dataset_dir = Path(dataset_dir)
         self.files = list(files)
         self.cloud_key = cloud_key
-        self.chunk_len = chunk_len
+        self.n_action_steps = n_action_steps
         self.action_normalizer = action_normalizer
         self.cloud_normalizer = cloud_normalizer
         self.points_per_object = points_per_object
@@ -189,7 +200,7 @@ class SpillageChunkDataset(IterableDataset):
         ep = self._episode(file)
         traj_norm = self.action_normalizer.normalize(ep["trajectory"]).astype(np.float32)
         for c, start in enumerate(ep["chunk_start"]):
-            window = trajectory_window(traj_norm, int(start), self.chunk_len)
+            window = trajectory_window(traj_norm, int(start), self.n_action_steps)
             cloud = subsample_points(ep["cloud"][c].astype(np.float32), self.points_per_object, rng)
             yield (
                 torch.from_numpy(np.ascontiguousarray(window)),

@@ -40,8 +40,8 @@ class SpillageObjective:
     """
 
     def __init__(self, predictor: TrainedPredictor, cloud_world: Any, policy_normalizer: MinMaxNormalizer | None = None, n_obs_steps: int = 5, n_action_steps: int = 12) -> None:
-        if n_action_steps != predictor.config.model.chunk_len:
-            raise InputError(f"the predictor judges chunks of {predictor.config.model.chunk_len} actions; the policy executes {n_action_steps}")
+        if n_action_steps != predictor.config.model.n_action_steps:
+            raise InputError(f"the predictor judges chunks of {predictor.config.model.n_action_steps} actions; the policy executes {n_action_steps}")
         if n_obs_steps < 1:
             raise InputError(f"`n_obs_steps` must be at least 1. Got {n_obs_steps}.")
         self.predictor = predictor

@@ -94,7 +94,7 @@ class SpillagePredictor(nn.Module):
                 layers += [nn.Linear(d_in, d_out), nn.ReLU()]
                 d_in = d_out
             self.waypoint_mlp = nn.Sequential(*layers)
-            traj_dim = config.chunk_len * d_in
+            traj_dim = config.n_action_steps * d_in
         fusion: list[nn.Module] = []
         d_in = cloud_dim + traj_dim
         for d_out in config.fusion_mlp:
@@ -115,7 +115,7 @@ class SpillagePredictor(nn.Module):
 
         An embedding of batch 1 is broadcast over a trajectory batch (one cloud, many candidates).
         """
-        L, dim = self.config.chunk_len, self.config.action_dim
+        L, dim = self.config.n_action_steps, self.config.action_dim
         if traj_norm.ndim != 3 or traj_norm.shape[1:] != (L, dim):
             raise ValueError(f"trajectory must have shape (B, {L}, {dim}); got {tuple(traj_norm.shape)}")
         b = traj_norm.shape[0]

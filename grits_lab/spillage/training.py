@@ -21,6 +21,7 @@ import yaml
 from torch.utils.data import DataLoader
 
 from grits_lab.config import config_fingerprint, config_to_dict
+from grits_lab.data.format import LEGACY_CHUNK_KEY, with_chunk_key
 from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import ConfigError
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
@@ -37,11 +38,13 @@ def run_dir(config: PredictorConfig) -> Path:
     return Path(config.output_dir) / config.name
 
 
-def _resume_fingerprint(config: PredictorConfig) -> str:
-    """Fingerprint of everything that must match to resume; `train.epochs` may grow (train longer)."""
+def _resume_fingerprints(config: PredictorConfig) -> tuple[str, str]:
+    """Fingerprint of everything that must match to resume (`train.epochs` may grow: train longer),
+    and the same with `model.n_action_steps` under its old name, which earlier checkpoints carry."""
     described = config_to_dict(config)
     del described["train"]["epochs"]
-    return config_fingerprint(described)
+    legacy = {**described, "model": with_chunk_key(described["model"], LEGACY_CHUNK_KEY)}
+    return config_fingerprint(described), config_fingerprint(legacy)
 
 
 def _loader(dataset: SpillageChunkDataset, batch_size: int) -> DataLoader:
@@ -69,9 +72,9 @@ def train_predictor(config: PredictorConfig, restart: bool = False, progress: bo
     from tqdm import tqdm
 
     torch.set_num_threads(config.train.num_threads)
-    fingerprint = _resume_fingerprint(config)
+    fingerprint, legacy_fingerprint = _resume_fingerprints(config)
     dataset_dir = Path(config.data.dataset)
-    index = check_spillage_dataset(dataset_dir, config.model.chunk_len)
+    index = check_spillage_dataset(dataset_dir, config.model.n_action_steps)
     out = ensure_writable_dir(run_dir(config))
     last_path, best_path = out / "last.pt", out / "best.pt"
     cloud_key = CLOUD_KEYS[config.data.cloud_source]
@@ -85,7 +88,7 @@ def train_predictor(config: PredictorConfig, restart: bool = False, progress: bo
     best_score = math.inf
     state = read_checkpoint(last_path) if last_path.exists() and not restart else None
     if state is not None:
-        if state.get("fingerprint") != fingerprint:
+        if state.get("fingerprint") not in (fingerprint, legacy_fingerprint):
             raise ConfigError(f"{last_path} was trained with a different config (only `train.epochs` may change on resume); pass --restart to start over")
         model.load_state_dict(state["model"])
         optimizer.load_state_dict(state["optimizer"])
@@ -96,7 +99,7 @@ def train_predictor(config: PredictorConfig, restart: bool = False, progress: bo
         action_norm, cloud_norm = fit_normalizers(dataset_dir, split.train, cloud_key, config.data.cloud_scale)
     write_text_atomic(out / "config.yaml", yaml.safe_dump(config_to_dict(config), sort_keys=False))
 
-    common = dict(cloud_key=cloud_key, chunk_len=config.model.chunk_len, action_normalizer=action_norm, cloud_normalizer=cloud_norm, points_per_object=config.data.points_per_object, seed=config.train.seed, cache=config.data.cache_episodes)
+    common = dict(cloud_key=cloud_key, n_action_steps=config.model.n_action_steps, action_normalizer=action_norm, cloud_normalizer=cloud_norm, points_per_object=config.data.points_per_object, seed=config.train.seed, cache=config.data.cache_episodes)
     train_set = SpillageChunkDataset(dataset_dir, split.train, shuffle=True, buffer_size=config.data.shuffle_buffer, **common)
     train_eval_set = SpillageChunkDataset(dataset_dir, split.train, shuffle=False, **common)
     train_eval_set._cache = train_set._cache  # one decoded copy of each training episode
@@ -157,12 +160,12 @@ def predict_chunks(predictor: TrainedPredictor, dataset_dir: str | Path, files: 
     """
     dataset_dir = Path(dataset_dir)
     cfg = predictor.config
-    index = check_spillage_dataset(dataset_dir, cfg.model.chunk_len, key="the predictor's model.chunk_len")
+    index = check_spillage_dataset(dataset_dir, cfg.model.n_action_steps, key="the predictor's model.n_action_steps")
     dataset = SpillageChunkDataset(
         dataset_dir,
         sorted(index["file"].tolist()) if files is None else list(files),
         cloud_key=CLOUD_KEYS[cfg.data.cloud_source],
-        chunk_len=cfg.model.chunk_len,
+        n_action_steps=cfg.model.n_action_steps,
         action_normalizer=predictor.action_normalizer,
         cloud_normalizer=predictor.cloud_normalizer,
         points_per_object=cfg.data.points_per_object,

@@ -85,7 +85,7 @@ def test_spillage_trial_clouds_have_n_points_where_the_objects_are(tmp_path):
     assert c == 3 and arrays["trajectory"].shape == (26, 9)
     for key in ("chunk_cloud", "chunk_cloud_raw"):
         assert arrays[key].shape == (c, 3, 200, 3) and arrays[key].dtype == np.float16
-    assert meta["label"] == int(arrays["chunk_spilled"].any())
+    assert meta["label"] == int(arrays["chunk_spilled"].any()) and meta["n_action_steps"] == config.n_action_steps
     food, count = primitive_food("sphere", make_rng(derive_seed(spec.seed, "food")), ParticleRanges(radius=(0.004, 0.006), fill_height=(0.005, 0.005)))
     assert meta["n_particles"] == count == fill_count(food, 0.005)
     # the first cloud is taken before any motion: the food is in the source bowl

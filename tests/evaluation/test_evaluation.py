@@ -171,7 +171,7 @@ def test_rollout_chunks_are_a_dataset_the_predictor_scores(models, tmp_path):
     assert "_chunks" not in records.columns
     dataset = tmp_path / "rollout_chunks" / "dp"
     index = load_index(dataset)
-    assert len(index) == 1 and index["chunk_len"].iloc[0] == 12
+    assert len(index) == 1 and index["n_action_steps"].iloc[0] == 12
     arrays, meta = read_episode(dataset / index["file"].iloc[0])
     c = len(arrays["chunk_start"])
     assert c >= 1 and arrays["chunk_cloud"].shape[:3] == (c, 3, N_POINTS)

@@ -11,9 +11,12 @@ from grits_lab.spillage.checkpoint import read_checkpoint
 from grits_lab.training.checkpoint import save_checkpoint
 
 
-def test_a_predictor_that_judges_other_chunks_than_the_policy_executes_is_refused(models, tmp_path):
+@pytest.mark.parametrize("stored_as", ["n_action_steps", "chunk_len"])  # chunk_len: checkpoints saved before the rename
+def test_a_predictor_that_judges_other_chunks_than_the_policy_executes_is_refused(models, tmp_path, stored_as):
     payload = read_checkpoint(models["predictor"])
-    payload["config"]["model"]["chunk_len"] = 8  # the policy executes 12
+    model = payload["config"]["model"]
+    del model["n_action_steps"]
+    model[stored_as] = 8  # the policy executes 12
     save_checkpoint(tmp_path / "pred8.pt", payload)
     config = eval_config(models, tmp_path / "run", methods=["dp", "grits"], checkpoints={"predictor": str(tmp_path / "pred8.pt")})
     with pytest.raises(ConfigError, match=r"`checkpoints.predictor` judges chunks of 8 actions, .* executes 12"):

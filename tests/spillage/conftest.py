@@ -15,7 +15,7 @@ from grits_lab.sim.foods import SHAPES
 BOWL_CENTRE = np.array([0.5, 0.0, 0.05])
 
 
-def write_tiny_spillage_dataset(root: Path, n_episodes: int = 12, n_points: int = 48, n_chunks: int = 3, seed: int = 0, chunk_len: int = 12) -> Path:
+def write_tiny_spillage_dataset(root: Path, n_episodes: int = 12, n_points: int = 48, n_chunks: int = 3, seed: int = 0, n_action_steps: int = 12) -> Path:
     """Episodes whose chunk label depends on trajectory and cloud together: a chunk spills when
     the spoon dips deeper than 1.5 cm below the top of the food pile."""
     rng = np.random.default_rng(seed)
@@ -24,13 +24,13 @@ def write_tiny_spillage_dataset(root: Path, n_episodes: int = 12, n_points: int 
     rot = matrix_to_rot6d(np.eye(3))
     for e in range(n_episodes):
         food_top = BOWL_CENTRE[2] + rng.uniform(0.0, 0.04)
-        t = n_chunks * chunk_len - 4  # the last chunk is short: exercises padding
+        t = n_chunks * n_action_steps - 4  # the last chunk is short: exercises padding
         depth = rng.uniform(-0.05, 0.02, size=n_chunks)
-        z = np.repeat(food_top + depth, chunk_len)[:t]
+        z = np.repeat(food_top + depth, n_action_steps)[:t]
         xyz = np.stack([BOWL_CENTRE[0] + rng.uniform(-0.03, 0.03, t), BOWL_CENTRE[1] + rng.uniform(-0.03, 0.03, t), z], 1)
         trajectory = np.concatenate([xyz, np.repeat(rot[None], t, 0)], 1).astype(np.float32)
-        starts = np.arange(n_chunks, dtype=np.int32) * chunk_len
-        spilled = np.array([trajectory[s : s + chunk_len, 2].min() < food_top - 0.015 for s in starts])
+        starts = np.arange(n_chunks, dtype=np.int32) * n_action_steps
+        spilled = np.array([trajectory[s : s + n_action_steps, 2].min() < food_top - 0.015 for s in starts])
         clouds = []
         for c in range(n_chunks):
             food = BOWL_CENTRE + rng.uniform([-0.05, -0.05, 0.0], [0.05, 0.05, food_top - BOWL_CENTRE[2]], (n_points, 3))
@@ -43,7 +43,7 @@ def write_tiny_spillage_dataset(root: Path, n_episodes: int = 12, n_points: int 
         write_episode(
             root,
             f"ep_{e:06d}",
-            {"trajectory": trajectory, "chunk_start": starts, "chunk_cloud": cloud, "chunk_cloud_raw": raw, "chunk_spilled": spilled, "spilled_over_time": np.cumsum(np.repeat(spilled, chunk_len)[:t]).astype(np.int32)},
+            {"trajectory": trajectory, "chunk_start": starts, "chunk_cloud": cloud, "chunk_cloud_raw": raw, "chunk_spilled": spilled, "spilled_over_time": np.cumsum(np.repeat(spilled, n_action_steps)[:t]).astype(np.int32)},
             {"shape": SHAPES[e % 4], "seed": seed * 1000 + e, "label": int(spilled.any()), "split": "train"},
         )
     rebuild_index(root)

@@ -113,15 +113,38 @@ def test_cli_trains_evaluates_and_reports_bad_input_in_one_line(tmp_path, tiny_d
     assert "kind 'spillage'" in capsys.readouterr().err
 
 
-def test_a_predictor_chunk_len_the_dataset_was_not_collected_with_is_refused_before_training(tmp_path, tiny_dataset):
+@pytest.mark.parametrize("stored_as", ["n_action_steps", "chunk_len"])  # chunk_len: datasets collected before the rename
+def test_a_predictor_chunk_length_the_dataset_was_not_collected_with_is_refused_before_training(tmp_path, tiny_dataset, stored_as):
     import shutil
 
-    dataset = Path(shutil.copytree(tiny_dataset, tmp_path / "d12"))  # collected with chunk_len 12
+    dataset = Path(shutil.copytree(tiny_dataset, tmp_path / "d12"))  # collected with chunks of 12
     manifest = yaml.safe_load((dataset / "dataset.yaml").read_text())
-    (dataset / "dataset.yaml").write_text(yaml.safe_dump({**manifest, "config": {"chunk_len": 12}}))
-    with pytest.raises(ConfigError, match=r"`model.chunk_len` is 8, .* collected with chunk_len 12"):
-        train_predictor(_config(tmp_path, dataset, epochs=1, chunk_len=8), progress=False)
+    (dataset / "dataset.yaml").write_text(yaml.safe_dump({**manifest, "config": {stored_as: 12}}))
+    with pytest.raises(ConfigError, match=r"`model.n_action_steps` is 8, .* collected with n_action_steps 12"):
+        train_predictor(_config(tmp_path, dataset, epochs=1, n_action_steps=8), progress=False)
     assert not (tmp_path / "runs").exists()
+
+
+def test_a_checkpoint_saved_before_the_chunk_length_took_the_policys_name_loads_and_resumes(tmp_path, tiny_dataset):
+    from grits_lab.config import config_fingerprint, config_to_dict
+    from grits_lab.spillage.checkpoint import load_predictor, read_checkpoint
+    from grits_lab.training.checkpoint import save_checkpoint
+
+    cfg = _config(tmp_path, tiny_dataset, epochs=1)
+    train_predictor(cfg, progress=False)
+    last = tmp_path / "runs" / "tiny" / "last.pt"
+    payload = read_checkpoint(last)
+    model = payload["config"]["model"]
+    model["chunk_len"] = model.pop("n_action_steps")
+    described = config_to_dict(cfg)  # what such a checkpoint's resume fingerprint hashed
+    del described["train"]["epochs"]
+    described["model"]["chunk_len"] = described["model"].pop("n_action_steps")
+    payload["fingerprint"] = config_fingerprint(described)
+    save_checkpoint(last, payload)
+    assert load_predictor(last).config.model.n_action_steps == 12
+    train_predictor(_config(tmp_path, tiny_dataset, epochs=2), progress=False)  # resumes: the fingerprint matches
+    resumed = read_checkpoint(last)
+    assert resumed["epoch"] == 1 and len(resumed["history"]) == 2 and resumed["config"]["model"]["n_action_steps"] == 12
 
 
 def test_a_non_finite_value_in_the_dataset_is_refused_naming_its_file(tmp_path, tiny_dataset):
