@@ -1,9 +1,9 @@
 """Package namespaces that import their modules on first use.
 
-The `grits-lab` command imports every area's `commands` module to build its parser; if a
-package's `__init__` imported torch or pybullet eagerly, `grits-lab --help` and every one-line
-config error would pay seconds for them. A package lists what it exports and where it lives;
-the module is imported the first time a name is looked up.
+The `grits-lab` command (grits_lab/cli/) builds its parser without importing any area, and a
+handler imports only what it runs; if a package's `__init__` imported torch or pybullet eagerly,
+every one-line config error would pay seconds for them. A package lists what it exports and
+where it lives; the module is imported the first time a name is looked up.
 """
 
 from __future__ import annotations

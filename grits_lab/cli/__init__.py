@@ -1,0 +1,68 @@
+"""The `grits-lab` command: parses arguments and hands each subcommand to its handler.
+
+The top of the package's layering: every other package is imported from here, never the other
+way round. Each command group has one module here (`<group>_commands.py`) exposing
+`register(subparsers)`, which adds its subcommands and sets `handler` to a function taking the
+parsed arguments and returning an exit code. Heavy imports (torch, ray, pybullet) happen inside
+the handlers so that `--help` and bad-input errors are fast. Errors a user can fix (GritsError)
+become one line and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from grits_lab import __version__
+from grits_lab.cli import (
+    compare_commands,
+    data_commands,
+    evaluate_commands,
+    pipeline_commands,
+    report_commands,
+    sim_commands,
+    sweep_commands,
+    train_commands,
+)
+from grits_lab.errors import GritsError
+
+# In the order `grits-lab --help` lists them.
+COMMAND_GROUPS = (
+    pipeline_commands,
+    data_commands,
+    sim_commands,
+    sweep_commands,
+    report_commands,
+    evaluate_commands,
+    compare_commands,
+    train_commands,
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="grits-lab",
+        description="Spillage-aware guided diffusion for robot food scooping, in PyBullet.",
+    )
+    parser.add_argument("--version", action="version", version=f"grits-lab {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for group in COMMAND_GROUPS:
+        group.register(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handler = getattr(args, "handler", None)
+    if handler is None:
+        parser.print_help(sys.stderr)
+        return 2
+    try:
+        return int(handler(args) or 0)
+    except GritsError as exc:
+        print(f"grits-lab: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("grits-lab: interrupted; finished work is kept and the job resumes when run again", file=sys.stderr)
+        return 130
