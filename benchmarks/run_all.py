@@ -10,7 +10,7 @@ machine drift from minute to minute.
     python benchmarks/run_all.py --full                # larger repeats, every food, both presets
     python benchmarks/run_all.py --with-pipeline       # also time `grits-lab pipeline experiments/quickstart.yaml`
 
-Outputs: results/benchmarks/summary.json and results/benchmarks/summary.md (or --out DIR).
+Outputs: results/benchmarks/summary.json and results/benchmarks/summary.md (or --output-dir DIR).
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import sys
 import time
 from pathlib import Path
 
+from grits_lab.cli.flags import add_flag
 from grits_lab.io import write_text_atomic
 
 HERE = Path(__file__).resolve().parent
@@ -159,9 +160,10 @@ def main() -> int:
     parser.add_argument("--only", nargs="+", help="run only these benchmarks")
     parser.add_argument("--with-pipeline", action="store_true", help="also time the quickstart pipeline end to end")
     parser.add_argument("--timeout", type=float, default=1800, help="seconds per benchmark")
-    parser.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
+    add_flag(parser, "--output-dir", deprecated=("--out",), default=str(ROOT / "results" / "benchmarks"),
+             help="where summary.json and summary.md go (default: results/benchmarks)")
     args = parser.parse_args()
-    out = Path(args.out)
+    out = Path(args.output_dir)
     out.mkdir(parents=True, exist_ok=True)
 
     summary = {

@@ -1,4 +1,7 @@
-"""Exceptions that the command line turns into one clear line and a non-zero exit."""
+"""Exceptions that the command line turns into one clear line and a non-zero exit, and the one
+line that an old spelling (of a flag or a config key) prints when it is still accepted."""
+
+import sys
 
 
 class GritsError(Exception):
@@ -15,3 +18,8 @@ class InputError(GritsError):
 
 class StorageError(GritsError):
     """An output location cannot be written, or a stored file is missing or corrupted."""
+
+
+def warn_deprecated(old: str, new: str) -> None:
+    """One line on stderr: `old` still works but is deprecated in favour of `new`."""
+    print(f"grits-lab: {old} is deprecated; use {new}", file=sys.stderr)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from grits_lab.cli.flags import DeprecatedFlag
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -19,8 +21,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("configs", nargs="+", metavar="CONFIG", help="predictor configs; the first is the reference")
     parser.add_argument("--eval", required=True, metavar="DATASET", help="held-out spillage dataset directory")
     parser.add_argument("--checkpoint", default="best", choices=["best", "last"], help="which checkpoint of each run (default: best)")
-    parser.add_argument("--output-dir", help="where the runs are (overrides output_dir in every config)")
-    parser.add_argument("--out", metavar="DIR", help="where the comparison is written (default: OUTPUT_DIR/comparison_<dataset>)")
+    parser.add_argument("--output-dir", metavar="DIR",
+                        help="where the runs are and the comparison is written, to OUTPUT_DIR/comparison_<dataset> "
+                             "(overrides output_dir in every config; default: the first config's)")
+    parser.add_argument("--out", metavar="DIR", action=DeprecatedFlag,
+                        use="--output-dir (the comparison goes to OUTPUT_DIR/comparison_<dataset>)")
     parser.add_argument("--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (default 2000)")
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed")
     parser.set_defaults(handler=_run)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from grits_lab.cli.flags import add_flag
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -21,9 +23,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--override", metavar="YAML", default=None,
                         help="YAML merged over the config (any of its keys), e.g. a sweep's best.yaml with `guidance: {rho: ..., s: ...}`")
     parser.add_argument("--methods", nargs="+", default=None, help="evaluate only these methods (default: the config's)")
-    parser.add_argument("--output-dir", default=None, help="run directory (default: the config's output_dir)")
+    parser.add_argument("--output-dir", metavar="DIR", default=None, help="run directory (overrides the config's output_dir)")
     parser.add_argument("--serial", action="store_true", help="run in this process instead of on Ray")
-    parser.add_argument("--fresh", action="store_true", help="discard the run directory's records and start over")
+    add_flag(parser, "--restart", deprecated=("--fresh",), action="store_true", help="discard the run directory's records and start over")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.set_defaults(handler=_run)
 
@@ -70,7 +72,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.serial:
         overrides["executor"] = {"backend": "serial"}
     config = load_evaluation_config(args.config, overrides)
-    records = evaluate(config, progress=not args.no_progress, fresh=args.fresh)
+    records = evaluate(config, progress=not args.no_progress, restart=args.restart)
     print(summary_table(records))
     print(f"records: {config.output_dir}/episodes.parquet ({len(records)} episodes); tables and figures: grits-lab report {config.output_dir}")
     return 0

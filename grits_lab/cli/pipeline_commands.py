@@ -16,7 +16,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("config", help="pipeline config, e.g. experiments/quickstart.yaml")
     parser.add_argument("--only", nargs="+", metavar="STAGE", help="run only these stages")
-    parser.add_argument("--force", nargs="+", metavar="STAGE", default=[], help="re-run these stages even if up to date")
+    parser.add_argument("--force", nargs="+", metavar="STAGE", default=[], help="run these stages even if up to date; each resumes its outputs (nothing is discarded)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     parser.set_defaults(handler=_run)
 

@@ -1,8 +1,10 @@
-"""`grits-lab report RUN_DIR [--out DIR] [--videos N]`: the paper's tables and figures from a run's records, optionally with replayed episodes."""
+"""`grits-lab report RUN_DIR [--output-dir DIR] [--videos N]`: the paper's tables and figures from a run's records, optionally with replayed episodes."""
 
 from __future__ import annotations
 
 import argparse
+
+from grits_lab.cli.flags import add_flag
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -16,7 +18,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
     )
     parser.add_argument("run_dir", metavar="RUN_DIR", help="evaluation or sweep run directory (or one .parquet file of records)")
-    parser.add_argument("--out", metavar="DIR", default=None, help="output directory (default: RUN_DIR/report)")
+    add_flag(parser, "--output-dir", deprecated=("--out",), metavar="DIR", default=None, help="output directory (default: RUN_DIR/report)")
     parser.add_argument("--videos", metavar="N", type=int, default=0,
                         help="replay up to N episodes per food under Diffusion Policy and GRITS (same seed) and show the videos "
                              "side by side (needs the run's checkpoints; RUN_DIR must be a `grits-lab evaluate` run directory)")
@@ -40,7 +42,7 @@ def _run(args: argparse.Namespace) -> int:
         if missing:
             raise InputError(f"--videos replays episodes from a `grits-lab evaluate` run directory; {run_dir} lacks {', '.join(missing)}")
         replay = replay_episode
-    result = build_report(args.run_dir, args.out, videos=args.videos, replay=replay)
+    result = build_report(args.run_dir, args.output_dir, videos=args.videos, replay=replay)
     print(f"report written to {result.out_dir} ({len(result.files)} files): {result.out_dir / 'report.html'}")
     for note in result.missing:
         print(f"  {note}")

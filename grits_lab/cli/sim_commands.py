@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from grits_lab.cli.flags import add_flag
 from grits_lab.errors import InputError
 from grits_lab.io import to_json
 
@@ -14,7 +15,7 @@ from grits_lab.io import to_json
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("rollout", help="play a trajectory (or the scripted expert) and print the episode record")
     p.add_argument("--food", required=True, help="food name (see `grits-lab foods`)")
-    p.add_argument("--quantity", required=True, help="quantity level of that food, e.g. low / medium / high")
+    add_flag(p, "--level", deprecated=("--quantity",), required=True, help="quantity level of that food, e.g. low / medium / high")
     p.add_argument("--seed", type=int, required=True, help="episode seed (world, particles, target bowl, expert)")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--trajectory", help="(T, 9) xyz + 6-D rotation or (T, 7) xyz + quaternion xyzw .npy, 10 Hz, world frame")
@@ -49,7 +50,7 @@ def _rollout(args: argparse.Namespace) -> int:
     # Check the cheap things first so bad input fails fast, before the simulator starts.
     foods = load_foods(args.foods_file)
     food = foods.get(args.food)
-    level_count(food, args.food, args.quantity)
+    level_count(food, args.food, args.level)
     trajectory = None
     if args.trajectory:
         from grits_lab.sim.episode import load_trajectory
@@ -73,7 +74,7 @@ def _rollout(args: argparse.Namespace) -> int:
                 frames.append(np.concatenate([im.rgb for im in images.values()], axis=1))
 
     try:
-        record, played = run_episode(env, args.food, args.quantity, args.seed, trajectory, on_step=on_step)
+        record, played = run_episode(env, args.food, args.level, args.seed, trajectory, on_step=on_step)
     finally:
         env.close()
     if args.save_trajectory:

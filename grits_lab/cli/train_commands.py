@@ -8,6 +8,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from grits_lab.cli.flags import add_flag
 from grits_lab.io import to_json
 
 
@@ -21,7 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         parser = train_sub.add_parser(name, help=help_text)
         parser.add_argument("config", help=f"experiment YAML, e.g. {example}")
         parser.add_argument("--max-steps", type=int, default=None, help="stop at this step instead of the config's max_steps")
-        parser.add_argument("--fresh", action="store_true", help="ignore an existing checkpoint and start over")
+        add_flag(parser, "--restart", deprecated=("--fresh",), action="store_true", help="ignore the run's existing checkpoint and start from step 0")
         parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
         parser.set_defaults(handler=handler)
     _register_predictor(train_sub)
@@ -54,7 +55,7 @@ def _train_policy(args: argparse.Namespace) -> int:
     from grits_lab.policies.diffusion.training import load_train_config, train_policy
 
     return _print_summary(train_policy(load_train_config(args.config), max_steps=args.max_steps,
-                                       progress=not args.no_progress, fresh=args.fresh, rollouts=ScoopRollouts))
+                                       progress=not args.no_progress, restart=args.restart, rollouts=ScoopRollouts))
 
 
 def _train_bc(args: argparse.Namespace) -> int:
@@ -62,7 +63,7 @@ def _train_bc(args: argparse.Namespace) -> int:
     from grits_lab.policies.bc.training import load_bc_config, train_bc
 
     return _print_summary(train_bc(load_bc_config(args.config), max_steps=args.max_steps,
-                                   progress=not args.no_progress, fresh=args.fresh))
+                                   progress=not args.no_progress, restart=args.restart))
 
 
 def _register_predictor(subparsers: argparse._SubParsersAction) -> None:
@@ -73,7 +74,7 @@ def _register_predictor(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("config", help="experiment YAML (e.g. experiments/predictor_cpu.yaml)")
     parser.add_argument("--dataset", help="training dataset directory (overrides data.dataset in the config)")
-    parser.add_argument("--output-dir", help="where runs are written (overrides output_dir in the config)")
+    parser.add_argument("--output-dir", metavar="DIR", help="where runs are written (overrides output_dir in the config)")
     parser.add_argument("--restart", action="store_true", help="discard the run's checkpoints and start from epoch 1")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar or per-epoch lines")
     parser.add_argument("--eval", metavar="DATASET", help="only score a checkpoint on every chunk of this (held-out) spillage dataset")

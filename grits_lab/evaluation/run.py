@@ -206,7 +206,7 @@ def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], diges
     }
 
 
-def evaluate(config: EvaluationConfig, *, progress: bool = True, fresh: bool = False, executor: Executor | None = None) -> pd.DataFrame:
+def evaluate(config: EvaluationConfig, *, progress: bool = True, restart: bool = False, executor: Executor | None = None) -> pd.DataFrame:
     """Run (or resume) the evaluation described by `config`; returns every record of the run directory."""
     keys = episode_keys(config)
     paths = {m: method_checkpoints(m, config.checkpoints) for m in config.methods}
@@ -220,7 +220,7 @@ def evaluate(config: EvaluationConfig, *, progress: bool = True, fresh: bool = F
     records_path = out / RECORDS_FILE
     write_text_atomic(out / "config.yaml", yaml.safe_dump(config_to_dict(config), sort_keys=False))
     write_json_atomic(out / "provenance.json", provenance(config, paths, digests, len(specs)))
-    if fresh and records_path.exists():
+    if restart and records_path.exists():
         records_path.unlink()
     done = _load_existing(records_path)
     finished = {identity_of(r) for r in done}

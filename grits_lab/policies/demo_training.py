@@ -100,7 +100,7 @@ def train_on_demonstrations(
     rollouts: RolloutsFactory | None = None,
     max_steps: int | None = None,
     progress: bool = True,
-    fresh: bool = False,
+    restart: bool = False,
 ) -> dict[str, Any]:
     """Train (or resume) `make_policy()` on `config.dataset` and return a summary.
 
@@ -141,12 +141,12 @@ def train_on_demonstrations(
     gen = torch.Generator(device=device).manual_seed(config.seed)
     step = 0
 
-    if last_path.exists() and not fresh:
+    if last_path.exists() and not restart:
         ckpt = load_checkpoint(last_path, map_location=device)
         if ckpt.get("dataset_fingerprint") != fingerprint:
             raise StorageError(
                 f"{last_path} was trained on different data (fingerprint {ckpt.get('dataset_fingerprint')} != {fingerprint}); "
-                "use --fresh to start over or another output_dir"
+                "use --restart to start over or another output_dir"
             )
         policy.load_state_dict(ckpt["policy"]["model"])
         policy.load_normalizer_state(ckpt["policy"]["normalizers"])  # type: ignore[operator]

@@ -51,7 +51,7 @@ def test_collect_on_an_unreachable_ray_cluster_fails_fast_without_an_output(tmp_
     monkeypatch.setenv("RAY_ADDRESS", f"127.0.0.1:{port}")
     repo = Path(__file__).resolve().parents[2]
     start = time.monotonic()
-    assert main(["collect", str(repo / "experiments" / config), "--output", str(tmp_path / "x"), "--no-progress"]) == 2
+    assert main(["collect", str(repo / "experiments" / config), "--output-dir", str(tmp_path / "x"), "--no-progress"]) == 2
     assert time.monotonic() - start < 30
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"cannot connect to the Ray cluster at 127.0.0.1:{port}" in err[0], err

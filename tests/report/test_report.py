@@ -183,6 +183,6 @@ def test_cli_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
 
 def test_cli_on_a_full_disk_is_one_line_and_exit_2(built, tmp_path, full_disk, capsys):
     run, _, _ = built
-    assert main(["report", str(run), "--out", str(tmp_path / "report")]) == 2
+    assert main(["report", str(run), "--output-dir", str(tmp_path / "report")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no space left on device" in err[0]

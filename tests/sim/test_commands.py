@@ -43,8 +43,8 @@ def test_scene_json_has_the_geometry(capsys):
 
 
 @pytest.mark.parametrize("argv, needles", [
-    (["--food", "pizza", "--quantity", "low"], ["unknown food", "pizza"]),
-    (["--food", "orange", "--quantity", "low"], ["quantity level", "low"]),
+    (["--food", "pizza", "--level", "low"], ["unknown food", "pizza"]),
+    (["--food", "orange", "--level", "low"], ["quantity level", "low"]),
 ])
 def test_unknown_food_or_level(capsys, argv, needles):
     code, _, err = run(capsys, "rollout", *argv, "--seed", "0", "--expert")
@@ -59,12 +59,12 @@ def test_unknown_food_or_level(capsys, argv, needles):
 def test_bad_trajectories(capsys, tmp_path, array, needle):
     path = tmp_path / "traj.npy"
     np.save(path, array)
-    code, _, err = run(capsys, "rollout", "--food", "orange", "--quantity", "medium", "--seed", "0", "--trajectory", str(path))
+    code, _, err = run(capsys, "rollout", "--food", "orange", "--level", "medium", "--seed", "0", "--trajectory", str(path))
     assert_one_line_error(code, err, needle)
 
 
 def test_missing_trajectory_file(capsys, tmp_path):
-    code, _, err = run(capsys, "rollout", "--food", "orange", "--quantity", "medium", "--seed", "0", "--trajectory", str(tmp_path / "no.npy"))
+    code, _, err = run(capsys, "rollout", "--food", "orange", "--level", "medium", "--seed", "0", "--trajectory", str(tmp_path / "no.npy"))
     assert_one_line_error(code, err, "not found")
 
 
@@ -74,7 +74,7 @@ def test_food_file_with_negative_mass(capsys, tmp_path):
                     "      - {shape: sphere, radius: [0.004, 0.005], mass: [-0.001, 0.001]}\n")
     code, _, err = run(capsys, "foods", "--foods-file", str(path))
     assert_one_line_error(code, err, "peas", "mass")
-    code, _, err = run(capsys, "rollout", "--food", "peas", "--quantity", "low", "--seed", "0", "--expert", "--foods-file", str(path))
+    code, _, err = run(capsys, "rollout", "--food", "peas", "--level", "low", "--seed", "0", "--expert", "--foods-file", str(path))
     assert_one_line_error(code, err, "peas", "mass")
 
 
@@ -83,7 +83,7 @@ def test_rollout_of_a_quaternion_trajectory_prints_one_json_record(capsys, tmp_p
     traj = np.tile(np.array([0.5, 0.0, 0.22, 0.0, 0.0, 0.0, 1.0]), (10, 1))
     path, saved = tmp_path / "hold.npy", tmp_path / "played.npy"
     np.save(path, traj)
-    code, out, _ = run(capsys, "rollout", "--food", "orange", "--quantity", "medium", "--seed", "2",
+    code, out, _ = run(capsys, "rollout", "--food", "orange", "--level", "medium", "--seed", "2",
                        "--trajectory", str(path), "--json", "--save-trajectory", str(saved))
     assert code == 0
     record = json.loads(out)

@@ -70,8 +70,9 @@ def test_cli_compares_trained_predictors_and_refuses_an_untrained_one(tmp_path, 
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "traj.yaml" in err[0] and "train it first" in err[0]
     assert main(["train", "predictor", paths[1], "--no-progress"]) == 0
-    out = tmp_path / "cmp"
-    assert main(["compare-predictors", *paths, "--eval", str(tiny_dataset), "--out", str(out), "--bootstrap", "200"]) == 0
+    out = tmp_path / "runs" / f"comparison_{tiny_dataset.name}"  # under the configs' output_dir
+    assert main(["compare-predictors", *paths, "--eval", str(tiny_dataset), "--output-dir", str(tmp_path / "runs"),
+                 "--bootstrap", "200"]) == 0
     summary = json.loads((out / "predictor_comparison.json").read_text())
     assert [m["model"] for m in summary["models"]] == ["full", "traj"] and summary["reference"] == "full"
     predictions = pd.read_parquet(out / "predictions.parquet")

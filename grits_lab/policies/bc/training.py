@@ -32,7 +32,7 @@ def load_bc_config(path: str | Path) -> BCTrainConfig:
     return load_config(path, BCTrainConfig)
 
 
-def train_bc(config: BCTrainConfig, max_steps: int | None = None, progress: bool = True, fresh: bool = False) -> dict[str, Any]:
+def train_bc(config: BCTrainConfig, max_steps: int | None = None, progress: bool = True, restart: bool = False) -> dict[str, Any]:
     """Train (or resume) the BC policy; returns a summary with the first and last training loss."""
     return train_on_demonstrations(config, lambda: BCPolicy(config.policy), desc="train bc", max_steps=max_steps,
-                                   progress=progress, fresh=fresh)
+                                   progress=progress, restart=restart)

@@ -39,7 +39,7 @@ def load_train_config(path: str | Path) -> PolicyTrainConfig:
     return load_config(path, PolicyTrainConfig)
 
 
-def train_policy(config: PolicyTrainConfig, max_steps: int | None = None, progress: bool = True, fresh: bool = False,
+def train_policy(config: PolicyTrainConfig, max_steps: int | None = None, progress: bool = True, restart: bool = False,
                  rollouts: RolloutsFactory | None = None) -> dict[str, Any]:
     """Train (or resume) the diffusion policy and return a summary.
 
@@ -48,4 +48,4 @@ def train_policy(config: PolicyTrainConfig, max_steps: int | None = None, progre
     scoops when `config.rollout.every` > 0 (grits_lab.evaluation.rollouts.ScoopRollouts).
     """
     return train_on_demonstrations(config, lambda: DiffusionPolicy(config.policy), desc="train policy", rollout=config.rollout, rollouts=rollouts,
-                                   max_steps=max_steps, progress=progress, fresh=fresh)
+                                   max_steps=max_steps, progress=progress, restart=restart)
