@@ -16,7 +16,7 @@ def register(subparsers: Any) -> None:
         description="Generate a dataset in parallel. Re-running the same command resumes an interrupted job.",
     )
     collect.add_argument("config", help="collection config, e.g. experiments/demos_quick.yaml")
-    add_flag(collect, "--output-dir", deprecated=("--output",), metavar="DIR", help="dataset directory (overrides `output` in the config)")
+    add_flag(collect, "--output-dir", deprecated=("--output",), metavar="DIR", help="dataset directory (overrides `output_dir` in the config)")
     collect.add_argument("--seed", type=int, help="root seed (overrides `seed:`; e.g. a held-out copy of a dataset)")
     collect.add_argument("--workers", type=int, help="number of parallel workers (overrides executor.workers)")
     collect.add_argument("--address", help="Ray cluster address (overrides executor.address and RAY_ADDRESS)")
@@ -38,7 +38,7 @@ def _collect(args: argparse.Namespace) -> int:
 
     config = load_collect_config(args.config)
     if args.output_dir:
-        config.output = args.output_dir
+        config.output_dir = args.output_dir
     if args.seed is not None:
         config.seed = args.seed
     if args.workers is not None:

@@ -37,7 +37,7 @@ def _run(args: argparse.Namespace) -> int:
     config = load_study_config(args.config)
     summary = run_sweep(config, n_trials=args.n_trials, storage=args.storage, report_only=args.report_only,
                         plots=not args.no_plots, progress=not args.no_progress)
-    _print_summary(summary, config.out_dir)
+    _print_summary(summary, config.study_dir)
     return 0
 
 

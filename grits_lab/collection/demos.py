@@ -10,7 +10,7 @@ A bowl configuration is one placement of the target bowl in the workspace (drawn
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 
@@ -40,8 +40,10 @@ class ImageConfig:
 
 @dataclass
 class DemosConfig:
+    deprecated_keys: ClassVar[dict[str, str]] = {"output": "output_dir"}
+
     kind: Literal["demos"] = "demos"
-    output: str = "results/datasets/demos"
+    output_dir: str = "results/datasets/demos"
     seed: int = 0
     foods: list[str] = field(default_factory=lambda: list(TRAINING_FOODS))
     # Quantity levels to use (empty: every level each food defines; orange has one).

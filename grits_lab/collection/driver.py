@@ -53,12 +53,12 @@ def data_code_hash() -> str:
 
 
 def collection_identity(config: Any) -> dict[str, Any]:
-    """What determines a collection's data: its config without `executor` and `output`, with only
+    """What determines a collection's data: its config without `executor` and `output_dir`, with only
     the `sim` keys that differ from the simulator's defaults (a stored dataset keeps its
     fingerprint when the simulator gains a key with a default)."""
     identity = config_to_dict(config)
     identity.pop("executor")
-    identity.pop("output")
+    identity.pop("output_dir")
     identity["sim"] = config_changes(config.sim)
     return identity
 

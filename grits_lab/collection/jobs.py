@@ -28,7 +28,7 @@ def load_collect_config(path: str | Path) -> Any:
 
 
 def run_collection(config: Any, progress: bool = True) -> dict[str, Any]:
-    """Run a demos or spillage collection to `config.output`, resuming what is already there.
+    """Run a demos or spillage collection to `config.output_dir`, resuming what is already there.
 
     Everything that can be checked is checked before the dataset directory is touched: the
     episode plan (names of foods and levels), an existing dataset's config, and the Ray cluster.
@@ -36,19 +36,19 @@ def run_collection(config: Any, progress: bool = True) -> dict[str, Any]:
     from grits_lab.collection.driver import DatasetWriter, existing_manifest, run_fixed_job
     from grits_lab.runners.config import check_reachable, cluster_address, make_executor
 
-    existing_manifest(config.output, config.kind, config.identity())
+    existing_manifest(config.output_dir, config.kind, config.identity())
     if config.kind == "demos":
         from grits_lab.collection.demos import plan_demos
 
         specs = plan_demos(config)
         check_reachable(cluster_address(config.executor))
-        writer = DatasetWriter(config.output, config.kind, config.identity())
+        writer = DatasetWriter(config.output_dir, config.kind, config.identity())
         with make_executor(config.executor) as executor:
             return run_fixed_job(executor, writer, specs, desc="demos", spilled_of=lambda m: m.get("spilled_any"), progress=progress)
     from grits_lab.collection.spillage_trials import BASE_TRAJECTORY_FILE, run_spillage_job, source_bowl_region
 
     check_reachable(cluster_address(config.executor))
-    writer = DatasetWriter(config.output, config.kind, config.identity())
+    writer = DatasetWriter(config.output_dir, config.kind, config.identity())
     base_path = writer.out_dir / BASE_TRAJECTORY_FILE
     if base_path.exists():
         base = np.load(base_path)  # the one this dataset started with: resume stays identical

@@ -16,7 +16,7 @@ import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 
@@ -83,10 +83,14 @@ class ExitConfig:
 
 @dataclass
 class SpillageConfig:
+    deprecated_keys: ClassVar[dict[str, str]] = {"output": "output_dir", "trials": "episodes"}
+
     kind: Literal["spillage"] = "spillage"
-    output: str = "results/datasets/spillage"
+    output_dir: str = "results/datasets/spillage"
     seed: int = 0
-    trials: int = 4000
+    # Episodes (spillage trials) the dataset keeps: an equal share per shape, split by
+    # spill_fraction into spill and no-spill; candidates are run until every share is full.
+    episodes: int = 4000
     spill_fraction: float = 0.5
     shapes: list[str] = field(default_factory=lambda: list(SHAPES))
     n_action_steps: int = 12  # waypoints per chunk: the policy's n_action_steps (authors' code: 12)
@@ -96,7 +100,7 @@ class SpillageConfig:
     base_trajectory: str | None = None
     base_expert_plans: int = 0
     # Candidates tried per shape before giving up on unfilled buckets, as a multiple of the
-    # shape's share of `trials`.
+    # shape's share of `episodes`.
     max_candidates_factor: float = 20.0
     raw_cloud: bool = True
     particles: ParticleRanges = field(default_factory=ParticleRanges)
@@ -107,10 +111,10 @@ class SpillageConfig:
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)
 
     def __post_init__(self) -> None:
-        require(self.trials >= 1, "trials", self.trials, "at least 1")
+        require(self.episodes >= 1, "episodes", self.episodes, "at least 1")
         require(0 <= self.spill_fraction <= 1, "spill_fraction", self.spill_fraction, "in [0, 1]")
         require(len(self.shapes) >= 1 and set(self.shapes) <= set(SHAPES), "shapes", self.shapes, f"a non-empty subset of {list(SHAPES)}")
-        require(self.trials % len(self.shapes) == 0, "trials", self.trials, f"a multiple of the number of shapes ({len(self.shapes)})")
+        require(self.episodes % len(self.shapes) == 0, "episodes", self.episodes, f"a multiple of the number of shapes ({len(self.shapes)})")
         require(self.n_action_steps >= 1, "n_action_steps", self.n_action_steps, "at least 1")
         require(self.base_expert_plans >= 0, "base_expert_plans", self.base_expert_plans, "non-negative")
         require(self.max_candidates_factor >= 1, "max_candidates_factor", self.max_candidates_factor, "at least 1")
@@ -119,11 +123,13 @@ class SpillageConfig:
         """What determines the data (the executor and the output path do not)."""
         from grits_lab.collection.driver import collection_identity
 
-        return collection_identity(self)
+        identity = collection_identity(self)
+        identity["trials"] = identity.pop("episodes")  # its name before the rename: datasets made then keep their fingerprint
+        return identity
 
     def targets(self) -> dict[str, tuple[int, int]]:
-        """(no-spill, spill) trials per shape: 4000 at 0.5 -> 500 / 500 for each of 4 shapes."""
-        per_shape = self.trials // len(self.shapes)
+        """(no-spill, spill) episodes per shape: 4000 at 0.5 -> 500 / 500 for each of 4 shapes."""
+        per_shape = self.episodes // len(self.shapes)
         spill = int(round(per_shape * self.spill_fraction))
         return {shape: (per_shape - spill, spill) for shape in self.shapes}
 
@@ -234,13 +240,13 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
     from grits_lab.collection.driver import Progress, failure_record
 
     targets = config.targets()
-    per_shape = config.trials // len(config.shapes)
+    per_shape = config.episodes // len(config.shapes)
     acceptor = BalancedAcceptor(targets, max_candidates=int(np.ceil(per_shape * config.max_candidates_factor)))
     log = CandidateLog(writer.out_dir / CANDIDATE_LOG)
     logged = log.read()
     on_disk = writer.finished()
     stats = {"tried": 0, "spilled": 0, "failed": 0}
-    bar = Progress(total=config.trials, initial=0, desc="spillage", enabled=progress)
+    bar = Progress(total=config.episodes, initial=0, desc="spillage", enabled=progress)
 
     def decide(decisions: list, from_log: bool) -> None:
         for d in decisions:
@@ -318,8 +324,8 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
     accepted = sum(sum(c.values()) for c in counts.values())
     labelled = stats["tried"] - stats["failed"]
     summary = {
-        "trials": accepted,
-        "requested": config.trials,
+        "episodes": accepted,
+        "requested": config.episodes,
         "buckets": {f"{shape}/{label}": n for shape, c in counts.items() for label, n in c.items()},
         "targets": {f"{shape}/{label}": t[label] for shape, t in targets.items() for label in (0, 1)},
         "candidates_tried": stats["tried"],

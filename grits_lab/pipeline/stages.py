@@ -91,22 +91,28 @@ def _executor(data: dict[str, Any], workers: int | None, address: str | None) ->
     return {**data, "executor": executor} if executor else data
 
 
+def _writing_to(data: dict[str, Any], path: Path) -> dict[str, Any]:
+    """`data` with `output_dir: path`; the stage file's old spellings of that key (`output`,
+    `results_dir`) are dropped, as the pipeline sets the key either way."""
+    return {**{k: v for k, v in data.items() if k not in ("output", "results_dir")}, "output_dir": str(path)}
+
+
 def wire(stage: str, data: dict[str, Any], layout: Layout, present: set[str],
          workers: int | None, address: str | None) -> dict[str, Any]:
     """The stage's config mapping with the pipeline's links set. `present`: configured stages."""
     if stage in ("demos", "spillage", "spillage_heldout"):
-        data = {**data, "output": str(layout.dataset(stage))}
+        data = _writing_to(data, layout.dataset(stage))
         if stage != "demos" and "demos" in present:
             # the spillage trajectories are shifts of the mean demonstration (SPEC)
             data["base_trajectory"] = str(layout.dataset("demos"))
         return _executor(data, workers, address)
     if stage == "policy":
-        return {**data, "dataset": str(layout.dataset("demos")), "output_dir": str(layout.policy_dir)}
+        return _writing_to({**data, "dataset": str(layout.dataset("demos"))}, layout.policy_dir)
     if stage == "bc":
-        return {**data, "dataset": str(layout.dataset("demos")), "output_dir": str(layout.bc_dir)}
+        return _writing_to({**data, "dataset": str(layout.dataset("demos"))}, layout.bc_dir)
     if stage.startswith("predictor"):
         data = merge_mappings(data, {"data": {"dataset": str(layout.dataset("spillage"))}})
-        return {**data, "name": stage, "output_dir": str(layout.predictor_root)}
+        return _writing_to({**data, "name": stage}, layout.predictor_root)
     if stage == "evaluate":
         checkpoints: dict[str, str | None] = {
             "policy": str(policy_checkpoint(layout)) if "policy" in present else None,
@@ -116,7 +122,7 @@ def wire(stage: str, data: dict[str, Any], layout: Layout, present: set[str],
         for name in ("predictor", "predictor_raw", "predictor_pointnet2"):
             checkpoints[name] = str(predictor_checkpoint(layout, name)) if name in present else None
         data = merge_mappings(data, {"checkpoints": checkpoints})
-        data = {**data, "output_dir": str(layout.evaluate_dir)}
+        data = _writing_to(data, layout.evaluate_dir)
         return _executor(data, workers, address)
     if stage == "sweep":
         evaluation = {
@@ -124,9 +130,9 @@ def wire(stage: str, data: dict[str, Any], layout: Layout, present: set[str],
             "checkpoints": [str(policy_checkpoint(layout)), str(predictor_checkpoint(layout, "predictor"))],
             "method": "grits",
         }
-        return {**data, "study_name": "sweep", "results_dir": str(layout.evaluate_dir), "evaluation": evaluation}
+        return {**_writing_to({**data, "study_name": "sweep"}, layout.evaluate_dir), "evaluation": evaluation}
     if stage == "report":
-        return {**data, "run_dir": str(layout.evaluate_dir), "out": str(layout.report_dir)}
+        return _writing_to({**data, "run_dir": str(layout.evaluate_dir)}, layout.report_dir)
     raise ValueError(f"unknown stage {stage}")
 
 
@@ -189,8 +195,8 @@ def _run_report(stage: str, path: Path, layout: Layout, progress: bool) -> dict[
     from grits_lab.report.build import build_report
 
     data = load_yaml(path)
-    result = build_report(data["run_dir"], data["out"])
-    return {"out_dir": str(result.out_dir), "files": len(result.files), "missing": list(result.missing)}
+    result = build_report(data["run_dir"], data["output_dir"])
+    return {"output_dir": str(result.out_dir), "files": len(result.files), "missing": list(result.missing)}
 
 
 _RUNNERS: dict[str, Callable[[str, Path, Layout, bool], dict[str, Any]]] = {

@@ -12,7 +12,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, ClassVar, Literal
 
 from grits_lab.config import config_fingerprint, load_config, require
 from grits_lab.errors import ConfigError, InputError
@@ -163,6 +163,8 @@ class SyntheticConfig:
 class StudyConfig:
     """A sweep over GRITS's guidance weight rho and threshold s (paper Algorithm 1)."""
 
+    deprecated_keys: ClassVar[dict[str, str]] = {"results_dir": "output_dir"}
+
     study_name: str
     n_trials: int
     validation: ValidationConfig
@@ -179,10 +181,10 @@ class StudyConfig:
     evaluator: Literal["grits", "synthetic"] = "grits"
     evaluation: EvaluationRefConfig = EvaluationRefConfig()
     synthetic: SyntheticConfig = SyntheticConfig()
-    # None: a journal file under results_dir/study_name/. Otherwise an RDB URL
+    # None: a journal file under output_dir/study_name/. Otherwise an RDB URL
     # (postgresql://user:password@host:port/db, sqlite:///path.db, mysql://...) or a journal file path.
     storage: str | None = None
-    results_dir: str = "results/sweeps"
+    output_dir: str = "results/sweeps"  # the study's outputs go to output_dir/study_name/
     # A running trial writes a heartbeat this often; one silent for stale_after_s is taken as dead.
     heartbeat_s: float = 20.0
     stale_after_s: float = 120.0
@@ -207,8 +209,8 @@ class StudyConfig:
                 f"more than twice heartbeat_s = {self.heartbeat_s}")
 
     @property
-    def out_dir(self) -> Path:
-        return Path(self.results_dir) / self.study_name
+    def study_dir(self) -> Path:
+        return Path(self.output_dir) / self.study_name
 
     def identity(self) -> str:
         """Fingerprint of what makes trials comparable: ranges, objective, episodes, evaluator."""

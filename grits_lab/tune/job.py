@@ -33,8 +33,8 @@ def run_sweep(config: StudyConfig, n_trials: int | None = None, storage: str | N
     # The evaluator is built before the storage is touched: a missing evaluation layer or
     # checkpoint fails at once, without leaving an empty study behind.
     evaluator = None if report_only else make_evaluator(config)
-    storage_obj, where = open_storage(storage or config.storage, config.out_dir / "journal.log")
-    out_dir = ensure_writable_dir(config.out_dir)
+    storage_obj, where = open_storage(storage or config.storage, config.study_dir / "journal.log")
+    out_dir = ensure_writable_dir(config.study_dir)
     if report_only:
         try:
             study = optuna.load_study(study_name=config.study_name, storage=storage_obj)

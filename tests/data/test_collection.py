@@ -54,7 +54,7 @@ def _short_spillage_config(tmp_path, **overrides):
     base = expert_mean_trajectory(SpillageConfig())[:26]
     np.save(tmp_path / "base.npy", base)
     data = {
-        "kind": "spillage", "output": str(tmp_path / "spill"), "trials": 2, "spill_fraction": 0.0, "shapes": ["sphere"],
+        "kind": "spillage", "output_dir": str(tmp_path / "spill"), "episodes": 2, "spill_fraction": 0.0, "shapes": ["sphere"],
         "base_trajectory": str(tmp_path / "base.npy"), "particles": {"fill_height": [0.005, 0.005], "radius": [0.004, 0.006]},
         "cloud": {"n_points": 200, "cad_surface_samples": 2000}, "sim": {"cameras": SMALL_CAMERAS},
         "executor": {"backend": "serial"}, "exit": {"enabled": False},
@@ -101,7 +101,7 @@ def test_spillage_trial_clouds_have_n_points_where_the_objects_are(tmp_path):
 def test_resume_after_interruption_gives_the_uninterrupted_dataset(tmp_path, monkeypatch):
     config = _short_spillage_config(tmp_path)
     run_collection(config, progress=False)
-    full = {p.name: read_episode(p) for p in list_episode_files(config.output)}
+    full = {p.name: read_episode(p) for p in list_episode_files(config.output_dir)}
     assert len(full) == 2
 
     class Interrupt(SerialExecutor):
@@ -113,35 +113,35 @@ def test_resume_after_interruption_gives_the_uninterrupted_dataset(tmp_path, mon
             Interrupt.polls += 1
             return super().poll(timeout)
 
-    second = _short_spillage_config(tmp_path, output=str(tmp_path / "spill2"))
+    second = _short_spillage_config(tmp_path, output_dir=str(tmp_path / "spill2"))
     import grits_lab.runners.config as runner_config
 
     with monkeypatch.context() as m:  # the job is stopped (as by Ctrl-C) after its first episode
         m.setattr(runner_config, "make_executor", lambda cfg: Interrupt())
         with pytest.raises(KeyboardInterrupt):
             run_collection(second, progress=False)
-    assert len(list_episode_files(second.output)) == 1
+    assert len(list_episode_files(second.output_dir)) == 1
     run_collection(second, progress=False)  # resumes
-    resumed = {p.name: read_episode(p) for p in list_episode_files(second.output)}
+    resumed = {p.name: read_episode(p) for p in list_episode_files(second.output_dir)}
     assert sorted(resumed) == sorted(full)
     for name, (arrays, meta) in full.items():
         r_arrays, r_meta = resumed[name]
         assert r_meta == meta
         for key in arrays:
             np.testing.assert_array_equal(r_arrays[key], arrays[key])
-    a, b = load_index(config.output), load_index(second.output)
+    a, b = load_index(config.output_dir), load_index(second.output_dir)
     assert a.drop(columns="file").equals(b.drop(columns="file"))
 
 
 def test_demo_episode_records_every_step(tmp_path):
     config = config_from_dict(DemosConfig, {
-        "output": str(tmp_path / "demos"), "foods": ["dried_jujube"], "levels": ["low"], "bowl_configs": 1,
+        "output_dir": str(tmp_path / "demos"), "foods": ["dried_jujube"], "levels": ["low"], "bowl_configs": 1,
         "cloud": {"n_points": 128, "cad_surface_samples": 1000}, "sim": {"cameras": SMALL_CAMERAS},
         "images": {"enabled": True, "height": 24, "width": 32}, "executor": {"backend": "serial"},
     })
     summary = run_collection(config, progress=False)
     assert summary["episodes"] == 1 and summary["failed"] == 0
-    (path,) = list_episode_files(config.output)
+    (path,) = list_episode_files(config.output_dir)
     arrays, meta = read_episode(path)
     t = meta["steps"]
     assert t > 40
@@ -157,14 +157,14 @@ def test_demo_episode_records_every_step(tmp_path):
     for key in ("food", "split", "level", "seed", "bowl_config", "scoop_success", "spilled", "n_particles"):
         assert key in meta
     assert meta["food"] == "dried_jujube" and meta["split"] == "train"
-    index = load_index(config.output)
+    index = load_index(config.output_dir)
     assert list(index["episode_id"]) == ["dried_jujube-low-b0"]
 
 
 def test_damaged_episode_file_is_reported_and_regenerated(tmp_path, capsys):
     config = _short_spillage_config(tmp_path)
     run_collection(config, progress=False)
-    files = list_episode_files(config.output)
+    files = list_episode_files(config.output_dir)
     original = {p.name: read_episode(p) for p in files}
     victim = files[0]
     data = bytearray(victim.read_bytes())
@@ -181,9 +181,9 @@ def test_damaged_episode_file_is_reported_and_regenerated(tmp_path, capsys):
 
     from grits_lab.data.info import dataset_summary
 
-    assert dataset_summary(config.output)["status"] == "complete"
+    assert dataset_summary(config.output_dir)["status"] == "complete"
     victim.unlink()  # a bucket is now one short of its target
-    status = dataset_summary(config.output)["status"]
+    status = dataset_summary(config.output_dir)["status"]
     import re
 
     found = re.match(r"incomplete \((\w+)/(\d) has (\d+) of (\d+)", status)

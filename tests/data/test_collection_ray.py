@@ -32,7 +32,7 @@ def ray_session():
 
 def test_serial_and_ray_give_identical_simulated_records():
     config = config_from_dict(SpillageConfig, {
-        "kind": "spillage", "trials": 4, "shapes": ["sphere", "cube"], "particles": {"fill_height": [0.005, 0.008]},
+        "kind": "spillage", "episodes": 4, "shapes": ["sphere", "cube"], "particles": {"fill_height": [0.005, 0.008]},
         "cloud": {"n_points": 128, "cad_surface_samples": 1000}, "sim": {"cameras": CAMERAS},
     })
     base = base_trajectory(config)[:30]
@@ -53,22 +53,22 @@ def test_serial_and_ray_give_identical_simulated_records():
 
 def test_a_worker_killed_during_collect_loses_and_duplicates_nothing(tmp_path, kill_a_worker_mid_episode):
     data = {
-        "kind": "spillage", "trials": 4, "spill_fraction": 0.0, "shapes": ["sphere", "cube"], "particles": {"fill_height": [0.005, 0.005]},
+        "kind": "spillage", "episodes": 4, "spill_fraction": 0.0, "shapes": ["sphere", "cube"], "particles": {"fill_height": [0.005, 0.005]},
         "cloud": {"n_points": 64, "cad_surface_samples": 500}, "sim": {"cameras": CAMERAS}, "exit": {"enabled": False},
         "raw_cloud": False,
     }
-    serial = config_from_dict(SpillageConfig, {**data, "output": str(tmp_path / "serial"), "executor": {"backend": "serial"}})
-    ray_cfg = config_from_dict(SpillageConfig, {**data, "output": str(tmp_path / "ray"), "executor": {"backend": "ray", "workers": 2}})
+    serial = config_from_dict(SpillageConfig, {**data, "output_dir": str(tmp_path / "serial"), "executor": {"backend": "serial"}})
+    ray_cfg = config_from_dict(SpillageConfig, {**data, "output_dir": str(tmp_path / "ray"), "executor": {"backend": "ray", "workers": 2}})
     run_collection(serial, progress=False)
     summary = run_collection(ray_cfg, progress=False)
     assert len(kill_a_worker_mid_episode) == 1
     assert summary["candidates_failed"] == 0
-    expected = {p.name: read_episode(p) for p in list_episode_files(serial.output)}
-    got = {p.name: read_episode(p) for p in list_episode_files(ray_cfg.output)}
+    expected = {p.name: read_episode(p) for p in list_episode_files(serial.output_dir)}
+    got = {p.name: read_episode(p) for p in list_episode_files(ray_cfg.output_dir)}
     assert sorted(got) == sorted(expected) and len(got) == 4
     for name, (arrays, meta) in expected.items():
         assert got[name][1] == meta
         for key in arrays:
             np.testing.assert_array_equal(got[name][0][key], arrays[key], err_msg=f"{name}:{key}")
-    logged = [json.loads(line)["id"] for line in (Path(ray_cfg.output) / "candidates.jsonl").read_text().splitlines()]
+    logged = [json.loads(line)["id"] for line in (Path(ray_cfg.output_dir) / "candidates.jsonl").read_text().splitlines()]
     assert len(logged) == len(set(logged))  # every candidate decided once

@@ -9,7 +9,7 @@ from grits_lab.cli import main
     "text, message",
     [
         ("kind: demo\n", "`kind` must be one of 'demos', 'spillage'"),
-        ("kind: spillage\ntrials: 10\n", "`trials` must be a multiple of the number of shapes (4)"),
+        ("kind: spillage\nepisodes: 10\n", "`episodes` must be a multiple of the number of shapes (4)"),
         ("kind: spillage\nshift: {x: -1}\n", "`shift.x` must be non-negative"),
         ("kind: demos\nbowl_config: 3\n", "unknown key `bowl_config`"),
         ("kind: demos\nexecutor: {workers: 0}\n", "`executor.workers` must be at least 1"),
@@ -33,7 +33,7 @@ def test_output_made_by_another_config_is_refused(tmp_path, capsys):
 
     DatasetWriter(tmp_path / "d", "spillage", {"seed": 0})
     path = tmp_path / "c.yaml"
-    path.write_text(f"kind: spillage\noutput: {tmp_path / 'd'}\n")
+    path.write_text(f"kind: spillage\noutput_dir: {tmp_path / 'd'}\n")
     assert main(["collect", str(path), "--serial"]) == 2
     assert "made with a different config" in capsys.readouterr().err
 
@@ -60,7 +60,7 @@ def test_collect_on_an_unreachable_ray_cluster_fails_fast_without_an_output(tmp_
 
 def test_collect_refuses_a_quantity_level_no_food_has_before_writing(tmp_path, capsys):
     path = tmp_path / "c.yaml"
-    path.write_text(f"kind: demos\nfoods: [soybeans]\nlevels: [low, medum]\noutput: {tmp_path / 'd'}\n")
+    path.write_text(f"kind: demos\nfoods: [soybeans]\nlevels: [low, medum]\noutput_dir: {tmp_path / 'd'}\n")
     assert main(["collect", str(path), "--serial"]) == 2
     err = capsys.readouterr().err
     assert "`levels`" in err and "'medum'" in err and err.count("\n") == 1

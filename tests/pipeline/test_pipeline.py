@@ -56,7 +56,7 @@ def test_up_to_date_stage_is_skipped_and_changed_stage_reruns(tmp_path, demos_fi
     episodes = sorted((out / "datasets" / "demos" / "episodes").glob("*.npz"))
     assert len(episodes) == 1
     wired = yaml.safe_load((out / "configs" / "demos.yaml").read_text())
-    assert wired["output"] == str(out / "datasets" / "demos")
+    assert wired["output_dir"] == str(out / "datasets" / "demos")
 
     second = run_pipeline(config, progress=False)
     assert second["demos"]["status"] == "skipped"

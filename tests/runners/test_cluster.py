@@ -85,7 +85,7 @@ def test_collection_runs_unchanged_on_the_cluster(ray_head, tmp_path):
     import yaml
 
     config = {
-        "kind": "spillage", "output": str(tmp_path / "spill"), "trials": 2, "spill_fraction": 0.0, "shapes": ["sphere"],
+        "kind": "spillage", "output_dir": str(tmp_path / "spill"), "episodes": 2, "spill_fraction": 0.0, "shapes": ["sphere"],
         "particles": {"fill_height": [0.005, 0.005]}, "cloud": {"n_points": 64, "cad_surface_samples": 500},
         "sim": {"cameras": [{"name": "front", "eye": [1.05, -0.15, 0.55], "target": [0.5, -0.1, 0.03], "width": 64, "height": 48}]},
         "executor": {"address": ray_head},
@@ -96,7 +96,7 @@ def test_collection_runs_unchanged_on_the_cluster(ray_head, tmp_path):
     proc = subprocess.run(["grits-lab", "collect", str(path), "--no-progress"], env=env, capture_output=True, text=True, timeout=400)
     assert proc.returncode == 0, proc.stderr[-3000:]
     summary = json.loads(proc.stdout[proc.stdout.index("{"):])
-    assert summary["trials"] == 2 and summary["buckets"] == {"sphere/0": 2, "sphere/1": 0}
+    assert summary["episodes"] == 2 and summary["buckets"] == {"sphere/0": 2, "sphere/1": 0}
     assert len(list((tmp_path / "spill" / "episodes").glob("*.npz"))) == 2
 
 

@@ -31,7 +31,7 @@ def sweep_file(tmp_path):
             "sampler": {"name": "tpe", "seed": 3, "n_startup_trials": 3},
             "validation": {"foods": ["soybeans", "dried_jujube"], "levels": ["low", "high"], "trials": 2,
                            "seed": 11},
-            "results_dir": str(tmp_path / "results"),
+            "output_dir": str(tmp_path / "results"),
         }
         for key, value in overrides.items():
             if isinstance(value, dict) and isinstance(data.get(key), dict):

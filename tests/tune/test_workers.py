@@ -24,7 +24,7 @@ def load_trials(config_path, storage_spec=None):
     import optuna
 
     config = load_study_config(config_path)
-    storage, _ = open_storage(storage_spec or config.storage, config.out_dir / "journal.log")
+    storage, _ = open_storage(storage_spec or config.storage, config.study_dir / "journal.log")
     return optuna.load_study(study_name=config.study_name, storage=storage).get_trials(deepcopy=True)
 
 
