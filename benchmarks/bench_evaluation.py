@@ -117,14 +117,14 @@ def bench_latency(preset: str, repeats: int) -> dict[str, object]:
 def bench_throughput(episodes: int, workers: int) -> dict[str, object]:
     from grits_lab.evaluation.config import EvaluationConfig
     from grits_lab.evaluation.run import evaluate
-    from grits_lab.spillage import save_checkpoint
-    from grits_lab.training import save_checkpoint as save_policy
+    from grits_lab.spillage import save_predictor
+    from grits_lab.training import save_checkpoint
 
     tmp = Path(tempfile.mkdtemp(prefix="bench-eval-"))
     policy, bowl, actions = _policy("cpu")
-    save_policy(tmp / "policy.pt", {"policy": policy.policy_state()})
+    save_checkpoint(tmp / "policy.pt", {"policy": policy.policy_state()})
     predictor, pcfg = _predictor("cpu", actions, bowl)
-    save_checkpoint(tmp / "predictor.pt", config=pcfg, model=predictor.model, action_normalizer=predictor.action_normalizer,
+    save_predictor(tmp / "predictor.pt", config=pcfg, model=predictor.model, action_normalizer=predictor.action_normalizer,
                     cloud_normalizer=predictor.cloud_normalizer)
     config = config_from_dict(EvaluationConfig, {
         "run_id": "bench", "output_dir": str(tmp / "run"), "methods": ["dp", "grits"], "foods": ["chocolate_balls"], "levels": ["low"],

@@ -58,7 +58,7 @@ def _rollout(args: argparse.Namespace) -> int:
         trajectory = load_trajectory(args.trajectory)
 
     from grits_lab.sim.env import ScoopEnv
-    from grits_lab.sim.episode import run_episode
+    from grits_lab.sim.episode import play_episode
 
     env = ScoopEnv(SimConfig(foods_file=args.foods_file))
     frames: list[Any] = []
@@ -74,7 +74,7 @@ def _rollout(args: argparse.Namespace) -> int:
                 frames.append(np.concatenate([im.rgb for im in images.values()], axis=1))
 
     try:
-        record, played = run_episode(env, args.food, args.level, args.seed, trajectory, on_step=on_step)
+        record, played = play_episode(env, args.food, args.level, args.seed, trajectory, on_step=on_step)
     finally:
         env.close()
     if args.save_trajectory:

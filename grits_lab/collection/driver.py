@@ -162,7 +162,7 @@ class DatasetWriter:
         return frame
 
 
-def failure_record(result: Any) -> dict[str, Any]:
+def failure_details(result: Any) -> dict[str, Any]:
     spec = result.spec
     return {
         "episode_id": result.episode_id,
@@ -227,7 +227,7 @@ def run_fixed_job(
                 bar.update(spilled=spilled_of(result.payload["meta"]))
             else:
                 failed += 1
-                writer.write_failure(result.episode_id, failure_record(result))
+                writer.write_failure(result.episode_id, failure_details(result))
                 bar.update(failed=True)
     finally:
         bar.close()

@@ -237,7 +237,7 @@ def make_trial_spec(config: SpillageConfig, base: np.ndarray, bowl: dict[str, An
 def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: np.ndarray, bowl: dict[str, Any], progress: bool = True) -> dict[str, Any]:
     """Generate candidates until every (shape, label) bucket is full; write accepted trials."""
     from grits_lab.collection.balance import BalancedAcceptor
-    from grits_lab.collection.driver import Progress, failure_record
+    from grits_lab.collection.driver import Progress, failure_details
 
     targets = config.targets()
     per_shape = config.episodes // len(config.shapes)
@@ -291,7 +291,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
             if result.ok:
                 writer.write(result.episode_id, result.payload)
             else:
-                writer.write_failure(result.episode_id, failure_record(result))
+                writer.write_failure(result.episode_id, failure_details(result))
 
     in_flight: dict[str, str] = {}
     try:
@@ -316,7 +316,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
                     payload = result.payload
                 else:
                     label, payload = None, None
-                    writer.write_failure(result.episode_id, failure_record(result))
+                    writer.write_failure(result.episode_id, failure_details(result))
                 decide(acceptor.add(shape, index, label, payload), from_log=False)
     finally:
         bar.close()

@@ -226,7 +226,7 @@ def begin_episode(env: Any, builder: Any, *, seed: int, food: str, level: str) -
     return EpisodeScene(env, builder, seed), history
 
 
-def run_episode(env: Any, controller: Any, config: Any, *, seed: int, food: str, level: str, builder: Any) -> dict[str, Any]:
+def run_task_episode(env: Any, controller: Any, config: Any, *, seed: int, food: str, level: str, builder: Any) -> dict[str, Any]:
     """The whole task for one (method, food, level, seed); returns the metric part of the record.
 
     With `config.rollout_chunks`, the record also holds "_chunks": the scoop as a spillage-dataset
@@ -304,7 +304,7 @@ def evaluation_episode(spec: Any, context: Any) -> dict[str, Any]:
 
     builder = context.cached(("cloud-builder", config_fingerprint(config.cloud)), lambda: builder_for_env(config.cloud, env))
     controller = build_controller(p.method, config, p.paths, context.cached)
-    record = run_episode(env, controller, config, seed=spec.seed, food=spec.food, level=spec.level, builder=builder)
+    record = run_task_episode(env, controller, config, seed=spec.seed, food=spec.food, level=spec.level, builder=builder)
     rho, s = guidance_columns(p.method, config)
     record.update({
         "run_id": p.run_id, "method": p.method, "food": spec.food, "split": p.split, "level": spec.level,

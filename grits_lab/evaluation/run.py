@@ -90,7 +90,7 @@ def checkpoint_digests(paths: dict[str, dict[str, str]]) -> dict[str, str]:
     return {p: file_digest(p) for p in files}
 
 
-def failure_record(spec: EpisodeSpec, error: str, wall_time_s: float) -> dict[str, Any]:
+def failed_episode_record(spec: EpisodeSpec, error: str, wall_time_s: float) -> dict[str, Any]:
     """The record of an episode that raised or whose worker died: every outcome False, the error kept."""
     p: EpisodeParams = spec.params["evaluation"]
     rho, s = guidance_columns(p.method, p.config)
@@ -107,7 +107,7 @@ def result_record(result: EpisodeResult) -> dict[str, Any]:
     assert result.spec is not None
     if result.ok:
         return dict(result.payload)
-    return failure_record(result.spec, result.error, result.wall_time_s)
+    return failed_episode_record(result.spec, result.error, result.wall_time_s)
 
 
 def records_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:

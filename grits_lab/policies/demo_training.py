@@ -25,7 +25,7 @@ from grits_lab.config import config_fingerprint, config_to_dict, require
 from grits_lab.errors import ConfigError, StorageError
 from grits_lab.io import ensure_writable_dir, write_text_atomic
 from grits_lab.policies.control import RolloutSettings, RolloutsFactory, rollout_episodes
-from grits_lab.policies.diffusion.dataset import DemoWindowDataset, dataset_fingerprint, list_demo_episodes, split_episodes
+from grits_lab.policies.diffusion.dataset import DemoWindowDataset, dataset_fingerprint, list_demo_episodes, split_demo_episodes
 from grits_lab.training import (
     EMA, MetricLogger, load_checkpoint, require_finite_loss, resolve_device, save_checkpoint, set_torch_threads,
     warmup_cosine,
@@ -124,7 +124,7 @@ def train_on_demonstrations(
     write_text_atomic(out / "config.yaml", yaml.safe_dump(config_to_dict(config), sort_keys=False))
 
     episodes = list_demo_episodes(config.dataset, tuple(config.splits))
-    train_ids, val_ids = split_episodes(episodes, config.val_fraction, config.seed)
+    train_ids, val_ids = split_demo_episodes(episodes, config.val_fraction, config.seed)
     fingerprint = dataset_fingerprint(config.dataset)
     policy_config = config.policy  # type: ignore[attr-defined]
     train_set = DemoWindowDataset(config.dataset, train_ids, policy_config, config.cache_points_per_object, config.seed, progress)

@@ -198,13 +198,13 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
     `CameraConfig` (default `grits_lab.sim.video.VIDEO_CAMERA`, 480 x 360); every: render every
     k-th action. plan_figure: a `.png` path for the guidance picture of one guided plan (`plan`,
     default the plan guidance moved farthest): the unguided and guided executed chunks from the
-    same noise over the composite cloud, with P(spill) of each (grits_lab.report.guidance.plan_figure);
+    same noise over the composite cloud, with P(spill) of each (grits_lab.report.guidance_effect.plan_figure);
     InputError for a method without guidance. Raises InputError (no such record, no config), StorageError (a checkpoint whose
     digest differs from the record's) or ConfigError (a config that no longer loads).
     """
     import torch
 
-    from grits_lab.evaluation.episode import run_episode
+    from grits_lab.evaluation.episode import run_task_episode
     from grits_lab.evaluation.methods import METHODS, build_controller
     from grits_lab.perception.scene import builder_for_env
     from grits_lab.sim.env import ScoopEnv
@@ -233,7 +233,7 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
             setting = "" if math.isnan(rho) else f"   rho {rho:g}" + (f" s {s}" if s >= 0 else "")
             title = f"{method}   {food} / {level}   trial {trial}   seed {seed}{setting}"
             played = _FilmedEnv(env, title, camera or VIDEO_CAMERA, every)
-        replayed = run_episode(played, controller, config, seed=seed, food=food, level=level, builder=builder)
+        replayed = run_task_episode(played, controller, config, seed=seed, food=food, level=level, builder=builder)
     finally:
         env.close()
     compared = sorted(k for k in replayed if k in record and k not in NOT_COMPARED)
@@ -243,7 +243,7 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
         result.video = str(write_video(video, played.frames, fps=config.sim.control_hz / played._every))
         result.frames = len(played.frames)
     if plan_figure is not None:
-        from grits_lab.report.guidance import plan_figure as draw_plan
+        from grits_lab.report.guidance_effect import plan_figure as draw_plan
 
         captured = controller.captured
         if not captured:

@@ -13,7 +13,7 @@ from grits_lab.lazy import lazy_exports
 __getattr__, __dir__, __all__ = lazy_exports(__name__, {
     "config": ["CameraConfig", "SimConfig"],
     "env": ["SceneGeometry", "ScoopEnv", "matrix_to_pose9", "pose9_to_matrix"],
-    "episode": ["EpisodeRecord", "load_trajectory", "play_trajectory", "run_episode", "validate_trajectory"],
+    "episode": ["EpisodeRecord", "load_trajectory", "play_episode", "play_trajectory", "validate_trajectory"],
     "expert": ["expert_trajectory", "nominal_expert_trajectory"],
     "foods": ["FoodLibrary", "FoodSpec", "ParticleComponent", "ParticleRanges", "load_foods", "primitive_food"],
     "gym_env": ["ENV_ID", "ScoopGymEnv"],

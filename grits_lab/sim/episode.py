@@ -1,4 +1,4 @@
-"""Playing whole trajectories: input validation, `play_trajectory`, `run_episode` and the `EpisodeRecord`."""
+"""Playing whole trajectories: input validation, `play_trajectory`, `play_episode` and the `EpisodeRecord`."""
 
 from __future__ import annotations
 
@@ -124,7 +124,7 @@ def make_record(env: Any, wall_time_s: float = 0.0, transferred: int = -1) -> Ep
     )
 
 
-def run_episode(env: Any, food: str, level: str, seed: int, trajectory: np.ndarray | None = None,
+def play_episode(env: Any, food: str, level: str, seed: int, trajectory: np.ndarray | None = None,
                 on_step: StepCallback | None = None) -> tuple[EpisodeRecord, np.ndarray]:
     """Reset to (food, level, seed) and play `trajectory`, or the seeded randomized expert when None.
 

@@ -20,8 +20,7 @@ from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import ConfigError, StorageError
 from grits_lab.spillage.config import PredictorConfig
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
-from grits_lab.training.checkpoint import load_checkpoint
-from grits_lab.training.checkpoint import save_checkpoint as write_checkpoint
+from grits_lab.training.checkpoint import load_checkpoint, save_checkpoint
 
 CHECKPOINT_FORMAT = "grits-spillage-predictor/1"
 
@@ -54,7 +53,7 @@ class TrainedPredictor:
             return self.spill_probability(traj, self.encode_cloud(cloud_world)).numpy()
 
 
-def save_checkpoint(path: str | Path, *, config: PredictorConfig, model: SpillagePredictor, action_normalizer: ActionNormalizer, cloud_normalizer: CloudNormalizer, extra: dict[str, Any] | None = None) -> None:
+def save_predictor(path: str | Path, *, config: PredictorConfig, model: SpillagePredictor, action_normalizer: ActionNormalizer, cloud_normalizer: CloudNormalizer, extra: dict[str, Any] | None = None) -> None:
     """Write the checkpoint atomically (a crash mid-write leaves the previous one intact)."""
     payload = {
         "format": CHECKPOINT_FORMAT,
@@ -64,7 +63,7 @@ def save_checkpoint(path: str | Path, *, config: PredictorConfig, model: Spillag
         "cloud_normalizer": cloud_normalizer.state_dict(),
         **(extra or {}),
     }
-    write_checkpoint(path, payload)
+    save_checkpoint(path, payload)
 
 
 def read_checkpoint(path: str | Path) -> dict[str, Any]:

@@ -74,7 +74,7 @@ def check_spillage_dataset(dataset_dir: str | Path, n_action_steps: int | None =
     return index
 
 
-def split_episodes(index: Any, val_fraction: float, seed: int, holdout_shape: str | None = None) -> EpisodeSplit:
+def split_spillage_episodes(index: Any, val_fraction: float, seed: int, holdout_shape: str | None = None) -> EpisodeSplit:
     """Split by episode: a seeded random `val_fraction`, or every episode of `holdout_shape`."""
     files = sorted(index["file"].tolist())
     if holdout_shape is not None:

@@ -62,7 +62,7 @@ class DP3Encoder(nn.Module):
         return self.projection(pooled)
 
 
-def farthest_point_sample(xyz: torch.Tensor, n_samples: int) -> torch.Tensor:
+def farthest_point_indices(xyz: torch.Tensor, n_samples: int) -> torch.Tensor:
     """Indices `(B, n_samples)` of a farthest-point sample of `xyz` `(B, N, 3)`, starting at point 0.
 
     Each next point is the one farthest from all points chosen so far; a point set with fewer
@@ -168,7 +168,7 @@ class PointNet2Encoder(nn.Module):
             features = onehot[:, None, :].expand(k, n, k).reshape(1, k * n, k).expand(b, -1, -1)
         for spec, mlp in zip(self.config.levels, self.levels):
             n_centroids = min(spec.n_centroids, xyz.shape[1])
-            centre_idx = farthest_point_sample(xyz, n_centroids)
+            centre_idx = farthest_point_indices(xyz, n_centroids)
             centres = _gather(xyz, centre_idx)  # (B, S, 3)
             group_idx = ball_query(xyz, centres, spec.radius, spec.n_neighbors)  # (B, S, k)
             grouped = _gather(xyz, group_idx) - centres[:, :, None, :]

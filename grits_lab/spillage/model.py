@@ -4,7 +4,7 @@
 MLP + 2-way softmax. The cloud embedding does not depend on the trajectory, so a guided sampler
 calls `encode_cloud` once per plan and `logits`/`spill_probability` at every guided step; both are
 differentiable with respect to the trajectory, which is given in the predictor's normalized
-action space (`grits_lab.spillage.guidance` maps a policy's space into it).
+action space (`grits_lab.spillage.guidance_objective` maps a policy's space into it).
 """
 
 from __future__ import annotations

@@ -26,9 +26,9 @@ from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import ConfigError
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
 from grits_lab.seeding import derive_seed
-from grits_lab.spillage.checkpoint import TrainedPredictor, read_checkpoint, save_checkpoint
+from grits_lab.spillage.checkpoint import TrainedPredictor, read_checkpoint, save_predictor
 from grits_lab.spillage.config import PredictorConfig
-from grits_lab.spillage.dataset import CLOUD_KEYS, SpillageChunkDataset, check_spillage_dataset, fit_normalizers, split_episodes
+from grits_lab.spillage.dataset import CLOUD_KEYS, SpillageChunkDataset, check_spillage_dataset, fit_normalizers, split_spillage_episodes
 from grits_lab.spillage.metrics import classification_report
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
 from grits_lab.training.metrics_log import require_finite_loss
@@ -78,7 +78,7 @@ def train_predictor(config: PredictorConfig, restart: bool = False, progress: bo
     out = ensure_writable_dir(run_dir(config))
     last_path, best_path = out / "last.pt", out / "best.pt"
     cloud_key = CLOUD_KEYS[config.data.cloud_source]
-    split = split_episodes(index, config.data.val_fraction, config.data.split_seed, config.data.holdout_shape)
+    split = split_spillage_episodes(index, config.data.val_fraction, config.data.split_seed, config.data.holdout_shape)
 
     torch.manual_seed(derive_seed(config.train.seed, "predictor-init"))
     model = SpillagePredictor(config.model)
@@ -137,8 +137,8 @@ def train_predictor(config: PredictorConfig, restart: bool = False, progress: bo
         extra = {"fingerprint": fingerprint, "optimizer": optimizer.state_dict(), "epoch": epoch, "history": history, "best_score": best_score, "split": {"train": split.train, "val": split.val}}
         ckpt = dict(config=config, model=model, action_normalizer=action_norm, cloud_normalizer=cloud_norm)
         if improved:
-            save_checkpoint(best_path, **ckpt, extra=extra)
-        save_checkpoint(last_path, **ckpt, extra=extra)
+            save_predictor(best_path, **ckpt, extra=extra)
+        save_predictor(last_path, **ckpt, extra=extra)
         write_json_atomic(out / "history.json", history)
         if progress:
             print(

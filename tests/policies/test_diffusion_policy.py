@@ -8,7 +8,7 @@ import torch
 from grits_lab.config import config_from_dict
 from grits_lab.errors import ConfigError, InputError, StorageError
 from grits_lab.policies.diffusion import DiffusionPolicy, DiffusionPolicyConfig
-from grits_lab.policies.diffusion.dataset import DemoWindowDataset, list_demo_episodes, split_episodes
+from grits_lab.policies.diffusion.dataset import DemoWindowDataset, list_demo_episodes, split_demo_episodes
 from grits_lab.policies.diffusion.training import PolicyTrainConfig, train_policy
 from grits_lab.sampling import DDIMSampler, GuidanceConfig
 
@@ -64,10 +64,10 @@ def test_windows_pad_with_edge_values_and_align_obs_with_actions(demo_dataset):
 
 def test_split_is_stable_and_disjoint():
     ids = [f"ep{i}" for i in range(20)]
-    train, val = split_episodes(ids, 0.2, seed=0)
+    train, val = split_demo_episodes(ids, 0.2, seed=0)
     assert len(val) == 4 and not set(train) & set(val) and sorted(train + val) == sorted(ids)
-    assert split_episodes(list(reversed(ids)), 0.2, seed=0) == (train, val)
-    assert split_episodes(ids, 0.2, seed=1)[1] != val
+    assert split_demo_episodes(list(reversed(ids)), 0.2, seed=0) == (train, val)
+    assert split_demo_episodes(ids, 0.2, seed=1)[1] != val
 
 
 def test_policy_overfits_a_tiny_dataset(tiny_dataset, tmp_path):

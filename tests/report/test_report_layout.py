@@ -106,7 +106,7 @@ def test_a_replay_that_cannot_run_is_shown_with_its_reason(tmp_path):
 
 
 def test_guidance_distributions_per_method_from_the_records(tmp_path):
-    from grits_lab.report.guidance import guided_episodes
+    from grits_lab.report.guidance_effect import guided_episodes
 
     frame = plausible_run(1)
     guided = frame["method"].isin(["grits", "dp_post"])

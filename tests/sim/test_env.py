@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from grits_lab.errors import InputError
-from grits_lab.sim import ScoopEnv, expert_trajectory, nominal_expert_trajectory, play_trajectory, run_episode
+from grits_lab.sim import ScoopEnv, expert_trajectory, nominal_expert_trajectory, play_episode, play_trajectory
 from grits_lab.sim.env import matrix_to_pose9
 from grits_lab.sim.expert import spoon_orientation
 from grits_lab.sim.foods import level_count, load_foods
@@ -77,7 +77,7 @@ def test_every_food_settles_without_spilling_while_the_spoon_waits(env, food):
 @pytest.fixture(scope="module")
 def scooped(env):
     """soybeans, low: the randomized expert scoop; the env is left holding the loaded spoon."""
-    record, traj = run_episode(env, "soybeans", "low", seed=0)
+    record, traj = play_episode(env, "soybeans", "low", seed=0)
     return record, traj
 
 
@@ -140,7 +140,7 @@ def test_a_trajectory_that_never_enters_the_bowl_is_a_scoop_failure(env):
 @pytest.mark.parametrize("food", ["chocolate_balls", "dried_jujube", "orange"])
 def test_expert_lifts_training_foods_without_spilling(env, food):
     level = list(env.foods.get(food).levels)[0]
-    record, _ = run_episode(env, food, level, seed=1)
+    record, _ = play_episode(env, food, level, seed=1)
     assert record.scoop_success and not record.spillage, record.summary()
 
 
@@ -150,7 +150,7 @@ def test_expert_succeeds_on_most_training_episodes(env):
     for food in env.foods.names("train"):
         for level in env.foods.get(food).levels:
             for seed in range(3):
-                record, _ = run_episode(env, food, level, seed=seed)
+                record, _ = play_episode(env, food, level, seed=seed)
                 outcomes.append(record.scoop_success and not record.spillage)
     assert np.mean(outcomes) >= 0.7, np.mean(outcomes)
 

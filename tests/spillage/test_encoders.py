@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from grits_lab.spillage.config import DP3EncoderConfig, PointNet2EncoderConfig, SetAbstractionConfig
-from grits_lab.spillage.encoders import DP3Encoder, PointNet2Encoder, ball_query, farthest_point_sample
+from grits_lab.spillage.encoders import DP3Encoder, PointNet2Encoder, ball_query, farthest_point_indices
 
 
 def _cloud(b=2, n=64, seed=0):
@@ -42,12 +42,12 @@ def _fps_reference(xyz, m):
     return chosen
 
 
-def test_farthest_point_sample_on_a_line_and_against_a_reference():
+def test_farthest_point_indices_on_a_line_and_against_a_reference():
     line = torch.tensor([[[float(i), 0.0, 0.0] for i in range(11)]])
     # from 0: the far end, then the middle, then the quarter points
-    assert farthest_point_sample(line, 4)[0].tolist() == [0, 10, 5, 2]
+    assert farthest_point_indices(line, 4)[0].tolist() == [0, 10, 5, 2]
     xyz = np.random.default_rng(3).normal(size=(2, 200, 3)).astype(np.float32)
-    got = farthest_point_sample(torch.from_numpy(xyz), 20).numpy()
+    got = farthest_point_indices(torch.from_numpy(xyz), 20).numpy()
     for b in range(2):
         assert got[b].tolist() == _fps_reference(xyz[b].astype(np.float64), 20)
         assert len(set(got[b].tolist())) == 20

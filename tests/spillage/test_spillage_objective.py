@@ -11,7 +11,7 @@ from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import InputError
 from grits_lab.spillage.checkpoint import TrainedPredictor
 from grits_lab.spillage.config import PredictorConfig
-from grits_lab.spillage.guidance import SpillageObjective
+from grits_lab.spillage.guidance_objective import SpillageObjective
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
 
 

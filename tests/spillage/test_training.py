@@ -15,7 +15,7 @@ from grits_lab.data.format import load_index
 from grits_lab.errors import ConfigError, InputError
 from grits_lab.spillage.checkpoint import load_predictor
 from grits_lab.spillage.config import PredictorConfig
-from grits_lab.spillage.dataset import split_episodes, trajectory_window
+from grits_lab.spillage.dataset import split_spillage_episodes, trajectory_window
 from grits_lab.spillage.training import evaluate_predictor, train_predictor
 
 
@@ -72,14 +72,14 @@ def test_resumed_run_equals_uninterrupted_run(tmp_path, tiny_dataset):
 
 def test_split_is_by_episode_and_can_hold_out_a_shape(tiny_dataset):
     index = load_index(tiny_dataset)
-    split = split_episodes(index, 0.25, seed=0)
+    split = split_spillage_episodes(index, 0.25, seed=0)
     assert not set(split.train) & set(split.val) and len(split.val) == 3
-    assert split_episodes(index, 0.25, seed=0) == split
-    held = split_episodes(index, 0.25, seed=0, holdout_shape="cone")
+    assert split_spillage_episodes(index, 0.25, seed=0) == split
+    held = split_spillage_episodes(index, 0.25, seed=0, holdout_shape="cone")
     shapes = dict(zip(index["file"], index["shape"]))
     assert {shapes[f] for f in held.val} == {"cone"} and "cone" not in {shapes[f] for f in held.train}
     with pytest.raises(InputError, match="torus"):
-        split_episodes(index, 0.25, seed=0, holdout_shape="torus")
+        split_spillage_episodes(index, 0.25, seed=0, holdout_shape="torus")
 
 
 def test_short_last_chunk_is_padded_with_the_final_pose():

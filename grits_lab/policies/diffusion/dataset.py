@@ -34,7 +34,7 @@ class EpisodeArrays:
         return int(self.arrays["action"].shape[0])
 
 
-def split_episodes(episode_ids: list[str], val_fraction: float, seed: int) -> tuple[list[str], list[str]]:
+def split_demo_episodes(episode_ids: list[str], val_fraction: float, seed: int) -> tuple[list[str], list[str]]:
     """Hold out about `val_fraction` of the episodes, chosen by hash (stable as episodes are added)."""
     if val_fraction <= 0 or len(episode_ids) < 2:
         return sorted(episode_ids), []
