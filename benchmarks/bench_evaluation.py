@@ -115,8 +115,8 @@ def bench_latency(preset: str, repeats: int) -> dict[str, object]:
 
 
 def bench_throughput(episodes: int, workers: int) -> dict[str, object]:
-    from grits_lab.evaluation.config import EvaluationConfig
-    from grits_lab.evaluation.run import evaluate
+    from grits_lab.evaluation.evaluation_config import EvaluationConfig
+    from grits_lab.evaluation.evaluation_run import evaluate
     from grits_lab.spillage import save_predictor
     from grits_lab.training import save_checkpoint
 

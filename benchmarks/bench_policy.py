@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from grits_lab.policies.diffusion import DiffusionPolicy
-from grits_lab.policies.diffusion.training import load_train_config
+from grits_lab.policies.diffusion.training_diffusion import load_train_config
 from grits_lab.sampling import DDIMSampler, GuidanceConfig
 from grits_lab.training import resolve_device, set_torch_threads
 
@@ -53,7 +53,7 @@ def timed(fn, repeats: int, device: torch.device) -> float:
 
 def make_objective(policy: DiffusionPolicy, cloud: torch.Tensor, device: torch.device):
     """P(spill) of the executed chunk from a predictor of the team's default size (cloud embedded once)."""
-    from grits_lab.spillage.config import PredictorModelConfig
+    from grits_lab.spillage.predictor_config import PredictorModelConfig
     from grits_lab.spillage.model import SpillagePredictor
 
     predictor = SpillagePredictor(PredictorModelConfig(n_action_steps=policy.config.n_action_steps)).to(device).eval()

@@ -20,7 +20,7 @@ import time
 
 import torch
 
-from grits_lab.spillage.config import PredictorModelConfig
+from grits_lab.spillage.predictor_config import PredictorModelConfig
 from grits_lab.spillage.model import SpillagePredictor
 
 

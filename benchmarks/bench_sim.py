@@ -39,7 +39,7 @@ def _levels(food, which: str) -> list[str]:
 
 def food_table(args) -> list[dict]:
     from grits_lab.sim import ScoopEnv
-    from grits_lab.sim.episode import play_trajectory
+    from grits_lab.sim.playback import play_trajectory
     from grits_lab.sim.expert import nominal_expert_trajectory
 
     env = ScoopEnv()
@@ -95,7 +95,7 @@ def lever_runs(args) -> dict:
 
     from grits_lab.collection.spillage_trials import SpillageConfig, expert_mean_trajectory, make_trial_spec, source_bowl_region
     from grits_lab.sim import ScoopEnv
-    from grits_lab.sim.config import SimConfig
+    from grits_lab.sim.sim_config import SimConfig
     from grits_lab.sim.foods import load_foods
 
     config = SpillageConfig()
@@ -167,7 +167,7 @@ def main() -> None:
     parser.add_argument("--markdown", action="store_true", help="also print the tables as Markdown on stderr")
     args = parser.parse_args()
 
-    from grits_lab.sim.config import SimConfig
+    from grits_lab.sim.sim_config import SimConfig
 
     cfg = SimConfig()
     table = [] if args.levers else food_table(args)

@@ -110,7 +110,7 @@ def test_collection_configs_read_their_old_keys(tmp_path, capsys, kind, old, new
 
 
 def test_a_sweep_reads_results_dir_as_output_dir(tmp_path, capsys):
-    from grits_lab.tune.config import load_study_config
+    from grits_lab.tune.study_config import load_study_config
 
     path = tmp_path / "s.yaml"
     path.write_text("study_name: s\nn_trials: 1\nevaluator: synthetic\nresults_dir: r\n"

@@ -17,7 +17,7 @@ ROOT = Path(grits_lab.__file__).parent
 # Lowest first; the foundation modules at the package's root come first.
 LAYERS: list[set[str]] = [
     {"errors"},
-    {"io", "seeding", "geometry", "lazy", "intervals", "versions"},
+    {"io", "seeding", "geometry", "intervals", "versions"},
     {"config", "records"},
     {"runners", "training"},  # generic engines: parallel episodes, the torch training utilities
     {"sim"},
@@ -87,8 +87,6 @@ def test_every_import_points_down_the_layers():
 def test_no_package_reaches_another_through_importlib_or_a_module_path_string():
     offenders = []
     for path in sorted(ROOT.rglob("*.py")):
-        if path.name == "lazy.py":  # a package's own lazy exports, within the package
-            continue
         text = path.read_text()
         if "import_module(" in text or "__import__(" in text:
             offenders.append(str(path.relative_to(ROOT)))
@@ -104,7 +102,24 @@ def test_the_checker_sees_an_upward_import(tmp_path, monkeypatch):
     """The rule is not vacuous: a data module importing evaluation is reported."""
     fake = tmp_path / "grits_lab"
     (fake / "data").mkdir(parents=True)
-    (fake / "data" / "leak.py").write_text("def f():\n    from grits_lab.evaluation.run import evaluate\n")
+    (fake / "data" / "leak.py").write_text("def f():\n    from grits_lab.evaluation.evaluation_run import evaluate\n")
     (fake / "data" / "fine.py").write_text("from ..sim import foods\nfrom . import format\n")
     monkeypatch.setattr(__import__(__name__, fromlist=["ROOT"]), "ROOT", fake)
-    assert _violations() == ["data/leak.py:2: data (layer 6) imports grits_lab.evaluation.run (layer 9)"]
+    assert _violations() == ["data/leak.py:2: data (layer 6) imports grits_lab.evaluation.evaluation_run (layer 9)"]
+
+
+def test_every_package_exports_its_public_names_from_init():
+    """One style: each package's __init__ imports its public names and lists them in __all__."""
+    import importlib
+
+    packages = sorted({p.parent for p in ROOT.rglob("__init__.py")} - {ROOT})
+    for folder in packages:
+        name = "grits_lab." + ".".join(folder.relative_to(ROOT).parts)
+        if name == "grits_lab.cli":
+            continue  # the command, not a library namespace: `main` and `build_parser`
+        module = importlib.import_module(name)
+        exported = getattr(module, "__all__", None)
+        assert exported, f"{name} has no __all__"
+        assert sorted(exported) == sorted(set(exported)), f"{name}.__all__ repeats a name"
+        missing = [n for n in exported if n not in vars(module)]
+        assert missing == [], f"{name}.__all__ names {missing}, which its __init__ does not import"

@@ -12,12 +12,12 @@ ROOT = Path(__file__).resolve().parents[1]
 def _loader(path: Path):
     from grits_lab.config import load_config, load_yaml
     from grits_lab.collection.jobs import load_collect_config
-    from grits_lab.evaluation.config import load_evaluation_config
-    from grits_lab.pipeline.config import load_pipeline_config
-    from grits_lab.policies.bc.training import load_bc_config
-    from grits_lab.policies.diffusion.training import load_train_config
-    from grits_lab.spillage.config import PredictorConfig
-    from grits_lab.tune.config import load_study_config
+    from grits_lab.evaluation.evaluation_config import load_evaluation_config
+    from grits_lab.pipeline.pipeline_config import load_pipeline_config
+    from grits_lab.policies.bc.training_bc import load_bc_config
+    from grits_lab.policies.diffusion.training_diffusion import load_train_config
+    from grits_lab.spillage.predictor_config import PredictorConfig
+    from grits_lab.tune.study_config import load_study_config
 
     name = path.name
     if path.parent.name == "sweeps":
@@ -51,7 +51,7 @@ def test_shipped_config_loads(path):
 ])
 def test_the_evaluation_guidance_block_is_the_samplers_config_checked_by_key(guidance, fragment):
     from grits_lab.errors import ConfigError
-    from grits_lab.evaluation.config import load_evaluation_config
+    from grits_lab.evaluation.evaluation_config import load_evaluation_config
     from grits_lab.sampling import GuidanceConfig
 
     path = ROOT / "experiments" / "evaluate_quick.yaml"
@@ -120,7 +120,7 @@ def test_datasets_collected_before_are_still_recognized_by_their_config(tmp_path
 
 def test_an_evaluation_config_with_a_sim_override_round_trips_through_its_yaml_form():
     from grits_lab.config import config_from_dict, config_to_dict
-    from grits_lab.evaluation.config import EvaluationConfig, load_evaluation_config
+    from grits_lab.evaluation.evaluation_config import EvaluationConfig, load_evaluation_config
 
     config = load_evaluation_config(ROOT / "experiments" / "evaluate_quick.yaml",
                                     {"sim": {"time_step": 0.005, "cameras": [{"name": "front", "eye": [1, 0, 0.6], "target": [0.5, 0, 0]}]}})
@@ -138,8 +138,8 @@ def test_shipped_evaluations_keep_their_episodes_and_seeds(name, count, digest):
     import hashlib
     import json
 
-    from grits_lab.evaluation.config import load_evaluation_config
-    from grits_lab.evaluation.run import episode_keys
+    from grits_lab.evaluation.evaluation_config import load_evaluation_config
+    from grits_lab.evaluation.evaluation_run import episode_keys
 
     rows = [[k.food, k.level, k.trial, k.seed] for k in episode_keys(load_evaluation_config(ROOT / "experiments" / name))]
     assert len(rows) == count and hashlib.sha256(json.dumps(rows).encode()).hexdigest()[:16] == digest
@@ -147,9 +147,9 @@ def test_shipped_evaluations_keep_their_episodes_and_seeds(name, count, digest):
 
 def test_a_sweeps_validation_block_as_an_evaluation_config_gives_the_same_episodes():
     from grits_lab.config import load_yaml
-    from grits_lab.evaluation.config import load_evaluation_config
-    from grits_lab.evaluation.run import episode_keys
-    from grits_lab.tune.config import load_study_config
+    from grits_lab.evaluation.evaluation_config import load_evaluation_config
+    from grits_lab.evaluation.evaluation_run import episode_keys
+    from grits_lab.tune.study_config import load_study_config
 
     sweep = ROOT / "sweeps" / "grits_quick.yaml"
     validation = load_yaml(sweep)["validation"]

@@ -37,8 +37,8 @@ def _run(args: argparse.Namespace) -> int:
     from grits_lab.config import load_config
     from grits_lab.errors import InputError
     from grits_lab.spillage.compare import compare_predictions, comparison_markdown, predict_all, write_comparison
-    from grits_lab.spillage.config import PredictorConfig
-    from grits_lab.spillage.training import run_dir
+    from grits_lab.spillage.predictor_config import PredictorConfig
+    from grits_lab.spillage.predictor_training import run_dir
 
     if args.bootstrap < 100:
         raise InputError(f"--bootstrap must be at least 100 (got {args.bootstrap})")

@@ -55,8 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from grits_lab.config import load_yaml
-    from grits_lab.evaluation.config import load_evaluation_config
-    from grits_lab.evaluation.run import evaluate, summary_table
+    from grits_lab.evaluation.evaluation_config import load_evaluation_config
+    from grits_lab.evaluation.evaluation_run import evaluate, summary_table
 
     overrides = dict(load_yaml(args.override)) if args.override else {}
     if "guidance" in overrides and not isinstance(overrides["guidance"], dict):

@@ -23,8 +23,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from grits_lab.errors import InputError
-    from grits_lab.pipeline.config import load_pipeline_config
-    from grits_lab.pipeline.run import run_pipeline
+    from grits_lab.pipeline.pipeline_config import load_pipeline_config
+    from grits_lab.pipeline.pipeline_run import run_pipeline
 
     config = load_pipeline_config(args.config)
     for name in (args.only or []) + list(args.force):

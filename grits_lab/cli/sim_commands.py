@@ -41,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _rollout(args: argparse.Namespace) -> int:
-    from grits_lab.sim.config import SimConfig
+    from grits_lab.sim.sim_config import SimConfig
     from grits_lab.sim.foods import level_count, load_foods
 
     video = Path(args.video) if args.video else None
@@ -53,12 +53,12 @@ def _rollout(args: argparse.Namespace) -> int:
     level_count(food, args.food, args.level)
     trajectory = None
     if args.trajectory:
-        from grits_lab.sim.episode import load_trajectory
+        from grits_lab.sim.playback import load_trajectory
 
         trajectory = load_trajectory(args.trajectory)
 
     from grits_lab.sim.env import ScoopEnv
-    from grits_lab.sim.episode import play_episode
+    from grits_lab.sim.playback import play_episode
 
     env = ScoopEnv(SimConfig(foods_file=args.foods_file))
     frames: list[Any] = []
@@ -145,7 +145,7 @@ def level_survey(library, names: list[str], seed: int = 0, settle: bool = True, 
                 entry = {"amount": amount.describe(), "n_particles": level_count(food, name, level)}
                 if settle:
                     if env is None:
-                        from grits_lab.sim.config import SimConfig
+                        from grits_lab.sim.sim_config import SimConfig
                         from grits_lab.sim.env import ScoopEnv
 
                         env = ScoopEnv(config or SimConfig())
@@ -165,7 +165,7 @@ def level_survey(library, names: list[str], seed: int = 0, settle: bool = True, 
 
 
 def _foods(args: argparse.Namespace) -> int:
-    from grits_lab.sim.config import SimConfig
+    from grits_lab.sim.sim_config import SimConfig
     from grits_lab.sim.foods import load_foods
 
     library = load_foods(args.foods_file)

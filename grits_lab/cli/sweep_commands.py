@@ -29,7 +29,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from grits_lab.errors import InputError
-    from grits_lab.tune.config import load_study_config
+    from grits_lab.tune.study_config import load_study_config
     from grits_lab.tune.job import run_sweep
 
     if args.n_trials is not None and args.n_trials < 1:

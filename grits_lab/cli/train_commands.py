@@ -52,7 +52,7 @@ def _print_summary(summary: dict[str, Any]) -> int:
 def _train_policy(args: argparse.Namespace) -> int:
     _check_max_steps(args)
     from grits_lab.evaluation.rollouts import ScoopRollouts  # scoops during training, played in the simulator
-    from grits_lab.policies.diffusion.training import load_train_config, train_policy
+    from grits_lab.policies.diffusion.training_diffusion import load_train_config, train_policy
 
     return _print_summary(train_policy(load_train_config(args.config), max_steps=args.max_steps,
                                        progress=not args.no_progress, restart=args.restart, rollouts=ScoopRollouts))
@@ -60,7 +60,7 @@ def _train_policy(args: argparse.Namespace) -> int:
 
 def _train_bc(args: argparse.Namespace) -> int:
     _check_max_steps(args)
-    from grits_lab.policies.bc.training import load_bc_config, train_bc
+    from grits_lab.policies.bc.training_bc import load_bc_config, train_bc
 
     return _print_summary(train_bc(load_bc_config(args.config), max_steps=args.max_steps,
                                    progress=not args.no_progress, restart=args.restart))
@@ -85,8 +85,8 @@ def _register_predictor(subparsers: argparse._SubParsersAction) -> None:
 def _train_predictor(args: argparse.Namespace) -> int:
     from grits_lab.config import load_config
     from grits_lab.io import write_json_atomic
-    from grits_lab.spillage.config import PredictorConfig
-    from grits_lab.spillage.training import run_dir
+    from grits_lab.spillage.predictor_config import PredictorConfig
+    from grits_lab.spillage.predictor_training import run_dir
 
     config = load_config(args.config, PredictorConfig)
     if args.dataset:
@@ -94,14 +94,14 @@ def _train_predictor(args: argparse.Namespace) -> int:
     if args.output_dir:
         config.output_dir = args.output_dir
     if args.eval is None:
-        from grits_lab.spillage.training import train_predictor
+        from grits_lab.spillage.predictor_training import train_predictor
 
         return _print_summary(train_predictor(config, restart=args.restart, progress=not args.no_progress))
 
     import torch
 
-    from grits_lab.spillage.checkpoint import load_predictor
-    from grits_lab.spillage.training import evaluate_predictor
+    from grits_lab.spillage.predictor_checkpoint import load_predictor
+    from grits_lab.spillage.predictor_training import evaluate_predictor
 
     torch.set_num_threads(config.train.num_threads)
     path = run_dir(config) / f"{args.checkpoint}.pt" if args.checkpoint in ("best", "last") else Path(args.checkpoint)

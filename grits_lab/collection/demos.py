@@ -16,10 +16,10 @@ import numpy as np
 
 from grits_lab.config import require
 from grits_lab.perception.composite import CloudConfig
-from grits_lab.runners.config import ExecutorConfig
+from grits_lab.runners.executor_config import ExecutorConfig
 from grits_lab.runners.spec import EpisodeSpec
 from grits_lab.seeding import derive_seed, make_rng
-from grits_lab.sim.config import SimConfig
+from grits_lab.sim.sim_config import SimConfig
 
 TRAINING_FOODS = ["brown_rice", "soybeans", "mung_beans", "chocolate_balls", "dried_jujube", "orange"]
 
@@ -127,7 +127,7 @@ def demo_episode(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
     from the episode's seed, so the episode replays exactly from its spec.
     """
     from grits_lab.config import config_fingerprint
-    from grits_lab.perception.scene import builder_for_env, camera_list, scene_clouds
+    from grits_lab.perception.env_clouds import builder_for_env, camera_list, scene_clouds
     from grits_lab.sim.env import worker_env
     from grits_lab.sim.expert import expert_trajectory
 

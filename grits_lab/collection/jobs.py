@@ -34,7 +34,7 @@ def run_collection(config: Any, progress: bool = True) -> dict[str, Any]:
     episode plan (names of foods and levels), an existing dataset's config, and the Ray cluster.
     """
     from grits_lab.collection.driver import DatasetWriter, existing_manifest, run_fixed_job
-    from grits_lab.runners.config import check_reachable, cluster_address, make_executor
+    from grits_lab.runners.executor_config import check_reachable, cluster_address, make_executor
 
     existing_manifest(config.output_dir, config.kind, config.identity())
     if config.kind == "demos":

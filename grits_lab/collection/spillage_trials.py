@@ -22,10 +22,10 @@ import numpy as np
 
 from grits_lab.config import require
 from grits_lab.perception.composite import CloudConfig
-from grits_lab.runners.config import ExecutorConfig
+from grits_lab.runners.executor_config import ExecutorConfig
 from grits_lab.runners.spec import EpisodeSpec
 from grits_lab.seeding import derive_seed, make_rng
-from grits_lab.sim.config import SimConfig
+from grits_lab.sim.sim_config import SimConfig
 from grits_lab.sim.foods import SHAPES, ParticleRanges, primitive_food
 
 
@@ -373,7 +373,7 @@ def expert_mean_trajectory(config: SpillageConfig) -> np.ndarray:
 def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
     """Run one candidate: random primitive food, the spec's trajectory, clouds at every chunk start."""
     from grits_lab.config import config_fingerprint
-    from grits_lab.perception.scene import builder_for_env, scene_clouds
+    from grits_lab.perception.env_clouds import builder_for_env, scene_clouds
     from grits_lab.sim.env import worker_env
 
     p: SpillageTrialParams = spec.params["trial"]

@@ -1,6 +1,6 @@
 """Typed configs loaded from YAML and validated on load."""
 
-from grits_lab.config.loading import (
+from grits_lab.config.typed_yaml import (
     config_changes,
     config_fingerprint,
     config_from_dict,

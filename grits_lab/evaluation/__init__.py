@@ -1,10 +1,19 @@
 """Evaluation of every method on the whole task (scoop -> transfer -> pour): registry, episodes, runs, sweep entry point."""
 
-from grits_lab.lazy import lazy_exports
+from grits_lab.evaluation.evaluation_config import EvaluationConfig, load_evaluation_config
+from grits_lab.evaluation.evaluation_run import episode_keys, evaluate, evaluate_file, evaluate_guidance
+from grits_lab.evaluation.grid import EpisodeGrid, EpisodeKey
+from grits_lab.evaluation.methods import METHODS, MethodSpec
 
-__getattr__, __dir__, __all__ = lazy_exports(__name__, {
-    "config": ["EvaluationConfig", "load_evaluation_config"],
-    "methods": ["METHODS", "MethodSpec"],
-    "grid": ["EpisodeGrid", "EpisodeKey"],
-    "run": ["episode_keys", "evaluate", "evaluate_file", "evaluate_guidance"],
-})
+__all__ = [
+    "METHODS",
+    "EpisodeGrid",
+    "EpisodeKey",
+    "EvaluationConfig",
+    "MethodSpec",
+    "episode_keys",
+    "evaluate",
+    "evaluate_file",
+    "evaluate_guidance",
+    "load_evaluation_config",
+]

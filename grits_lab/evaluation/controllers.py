@@ -1,7 +1,7 @@
 """The learned methods' scoop controllers (dp, dp_post, the GRITS variants, bc) and the episode's observation history.
 
 They follow the controller protocol of grits_lab/policies/control.py, as the baselines in
-grits_lab/policies do. `scene` (grits_lab/evaluation/scene.py) gives read access to the cameras
+grits_lab/policies do. `scene` (grits_lab/evaluation/episode_scene.py) gives read access to the cameras
 and the spoon's sensors; `history` holds the measured spoon poses and clouds so far.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -17,6 +17,9 @@ import torch
 from grits_lab.policies.control import Chunk, is_still
 from grits_lab.sampling.guidance import DDIMSampler, GuidanceConfig, PostHocConfig, PostHocSampler
 from grits_lab.seeding import derive_seed
+
+if TYPE_CHECKING:  # annotations only
+    from grits_lab.evaluation.episode_scene import EpisodeScene
 
 __all__ = ["BCController", "Chunk", "DiffusionController", "LearnedController", "ObsHistory", "is_still"]
 
@@ -115,12 +118,12 @@ class DiffusionController(LearnedController):
         self.capture_plans = False
         self.captured: list[dict[str, Any]] = []
 
-    def reset(self, scene: Any) -> None:
+    def reset(self, scene: EpisodeScene) -> None:
         self.plans = 0
         self.seed = scene.seed
         self.captured = []
 
-    def plan(self, history: ObsHistory, scene: Any) -> Chunk:
+    def plan(self, history: ObsHistory, scene: EpisodeScene) -> Chunk:
         from grits_lab.spillage import SpillageObjective
 
         start = time.perf_counter()
@@ -159,10 +162,10 @@ class DiffusionController(LearnedController):
 class BCController(LearnedController):
     """Behavior cloning: one deterministic regression of the next chunk per plan."""
 
-    def reset(self, scene: Any) -> None:
+    def reset(self, scene: EpisodeScene) -> None:
         pass
 
-    def plan(self, history: ObsHistory, scene: Any) -> Chunk:
+    def plan(self, history: ObsHistory, scene: EpisodeScene) -> Chunk:
         start = time.perf_counter()
         actions = self.policy.predict_action(self.observation(history))
         return Chunk(actions, {}, time.perf_counter() - start)

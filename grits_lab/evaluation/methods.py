@@ -13,9 +13,13 @@ import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from grits_lab.errors import ConfigError, StorageError
+
+if TYPE_CHECKING:  # annotations only
+    from grits_lab.evaluation.evaluation_config import CheckpointPaths, EvaluationConfig
+    from grits_lab.policies.control import Controller
 
 
 @dataclass(frozen=True)
@@ -42,7 +46,7 @@ METHODS: dict[str, MethodSpec] = {
 }
 
 
-def method_checkpoints(name: str, checkpoints: Any) -> dict[str, str]:
+def method_checkpoints(name: str, checkpoints: CheckpointPaths) -> dict[str, str]:
     """{key: path} of the files `name` needs; a missing or unset one is a ConfigError naming it."""
     spec = METHODS[name]
     out = {}
@@ -71,7 +75,7 @@ def file_digest(path: str | Path) -> str:
     return digest.hexdigest()[:16]
 
 
-def guidance_columns(name: str, config: Any) -> tuple[float, int]:
+def guidance_columns(name: str, config: EvaluationConfig) -> tuple[float, int]:
     """(rho, s) recorded for a method: NaN / -1 for methods without guidance."""
     spec = METHODS[name]
     if spec.sampler == "guided":
@@ -81,7 +85,8 @@ def guidance_columns(name: str, config: Any) -> tuple[float, int]:
     return math.nan, -1
 
 
-def build_controller(name: str, config: Any, paths: dict[str, str], cache: Callable[[Any, Callable[[], Any]], Any]) -> Any:
+def build_controller(name: str, config: EvaluationConfig, paths: dict[str, str],
+                     cache: Callable[[Any, Callable[[], Any]], Any]) -> Controller:
     """The scoop controller of method `name`; `cache(key, factory)` keeps loaded models per worker."""
     from grits_lab.evaluation import controllers
 
@@ -143,8 +148,8 @@ def check_method_checkpoints(name: str, paths: dict[str, str]) -> None:
     if spec.predictor is None:
         return
     from grits_lab.data.format import CHUNK_KEY, with_chunk_key
-    from grits_lab.spillage.checkpoint import read_checkpoint
-    from grits_lab.spillage.config import PredictorModelConfig
+    from grits_lab.spillage.predictor_checkpoint import read_checkpoint
+    from grits_lab.spillage.predictor_config import PredictorModelConfig
 
     try:
         stored = with_chunk_key(read_checkpoint(paths[spec.predictor])["config"]["model"])  # either name of the key

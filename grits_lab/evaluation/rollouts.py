@@ -24,7 +24,7 @@ class ScoopRollouts:
     """`grits_lab.policies.control.Rollouts` in the simulator: a simulator and cloud builder kept for the whole run; `__call__(policy)` plays the scoops."""
 
     def __init__(self, settings: RolloutSettings, episodes: list[tuple[str, str, int]]) -> None:
-        from grits_lab.perception.scene import builder_for_env
+        from grits_lab.perception.env_clouds import builder_for_env
         from grits_lab.sim import ScoopEnv
 
         self.settings = settings
@@ -35,7 +35,7 @@ class ScoopRollouts:
     def __call__(self, policy: Any) -> dict[str, float]:
         """Scoop success and spillage rates of `policy` (put in eval mode for the rollouts) over the episodes."""
         from grits_lab.evaluation.controllers import DiffusionController
-        from grits_lab.evaluation.episode import begin_episode, run_scoop
+        from grits_lab.evaluation.task_episode import begin_episode, run_scoop
 
         was_training = policy.training
         policy.eval()

@@ -1,7 +1,7 @@
 """Point clouds from the simulated cameras: back-projection, CAD sampling, farthest-point sampling, composites.
 
 Pure numpy/open3d on arrays, no simulator state: the adapter that reads a ScoopEnv lives in
-`grits_lab.perception.scene`.
+`grits_lab.perception.env_clouds`.
 """
 
 from grits_lab.perception.clouds import (

@@ -4,8 +4,8 @@
 interrupted one resumes when the command runs again.
 """
 
-from grits_lab.pipeline.config import PipelineConfig, StageConfig, load_pipeline_config
-from grits_lab.pipeline.run import run_pipeline
+from grits_lab.pipeline.pipeline_config import PipelineConfig, StageConfig, load_pipeline_config
+from grits_lab.pipeline.pipeline_run import run_pipeline
 from grits_lab.pipeline.stages import Layout
 
 __all__ = ["Layout", "PipelineConfig", "StageConfig", "load_pipeline_config", "run_pipeline"]

@@ -149,22 +149,22 @@ def _run_collect(stage: str, path: Path, layout: Layout, progress: bool) -> dict
 
 def _run_policy(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
     from grits_lab.evaluation.rollouts import ScoopRollouts
-    from grits_lab.policies.diffusion.training import load_train_config, train_policy
+    from grits_lab.policies.diffusion.training_diffusion import load_train_config, train_policy
 
     return train_policy(load_train_config(path), progress=progress, rollouts=ScoopRollouts)
 
 
 def _run_bc(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
-    from grits_lab.policies.bc.training import load_bc_config, train_bc
+    from grits_lab.policies.bc.training_bc import load_bc_config, train_bc
 
     return train_bc(load_bc_config(path), progress=progress)
 
 
 def _run_predictor(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
     from grits_lab.config import load_config
-    from grits_lab.spillage.checkpoint import load_predictor
-    from grits_lab.spillage.config import PredictorConfig
-    from grits_lab.spillage.training import evaluate_predictor, train_predictor
+    from grits_lab.spillage.predictor_checkpoint import load_predictor
+    from grits_lab.spillage.predictor_config import PredictorConfig
+    from grits_lab.spillage.predictor_training import evaluate_predictor, train_predictor
 
     summary = train_predictor(load_config(path, PredictorConfig), progress=progress)
     heldout = layout.dataset("spillage_heldout")
@@ -175,8 +175,8 @@ def _run_predictor(stage: str, path: Path, layout: Layout, progress: bool) -> di
 
 
 def _run_evaluate(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
-    from grits_lab.evaluation.config import load_evaluation_config
-    from grits_lab.evaluation.run import evaluate, summary_table
+    from grits_lab.evaluation.evaluation_config import load_evaluation_config
+    from grits_lab.evaluation.evaluation_run import evaluate, summary_table
 
     records = evaluate(load_evaluation_config(path), progress=progress)
     print(summary_table(records))
@@ -184,7 +184,7 @@ def _run_evaluate(stage: str, path: Path, layout: Layout, progress: bool) -> dic
 
 
 def _run_sweep(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
-    from grits_lab.tune.config import load_study_config
+    from grits_lab.tune.study_config import load_study_config
     from grits_lab.tune.job import run_sweep
 
     return run_sweep(load_study_config(path), progress=progress)

@@ -7,6 +7,7 @@ this package exports what every controller and the training loop agree on
 
 from grits_lab.policies.control import (
     Chunk,
+    Controller,
     RolloutSettings,
     Rollouts,
     RolloutsFactory,
@@ -15,4 +16,4 @@ from grits_lab.policies.control import (
     rollout_episodes,
 )
 
-__all__ = ["Chunk", "RolloutSettings", "Rollouts", "RolloutsFactory", "ScoopSettings", "is_still", "rollout_episodes"]
+__all__ = ["Chunk", "Controller", "RolloutSettings", "Rollouts", "RolloutsFactory", "ScoopSettings", "is_still", "rollout_episodes"]

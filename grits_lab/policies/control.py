@@ -1,6 +1,6 @@
 """The scoop controller's side of an episode: the chunk it returns, how chunks are executed, and scoops played during training.
 
-The controller protocol (duck-typed; the episode loop is grits_lab/evaluation/episode.py):
+The controller protocol (duck-typed; the episode loop is grits_lab/evaluation/task_episode.py):
 
     controller.cloud_steps: int          newest steps whose composite cloud the controller reads
     controller.stops_when_still: bool    (optional) a chunk that holds the pose ends the scoop
@@ -26,7 +26,7 @@ import numpy as np
 from grits_lab.config import require
 from grits_lab.perception.composite import CloudConfig
 from grits_lab.seeding import derive_seed
-from grits_lab.sim.config import SimConfig
+from grits_lab.sim.sim_config import SimConfig
 
 
 @dataclass
@@ -82,6 +82,22 @@ def rollout_episodes(pairs: list[tuple[str, str]], n: int, seed: int) -> list[tu
     """(food, level, seed) of the `n` scoops: the (food, level) pairs in turn, seeds derived from `seed`."""
     ordered = sorted(set(pairs))
     return [(*ordered[i % len(ordered)], derive_seed(seed, "rollout", i)) for i in range(n)]
+
+
+class Controller(Protocol):
+    """What the episode loop asks for the next chunk of actions (the protocol in this module's docstring).
+
+    `history` is the episode's measured spoon poses and clouds so far
+    (grits_lab.evaluation.controllers.ObsHistory); `scene` gives read access to the cameras and
+    the spoon's sensors (grits_lab.evaluation.episode_scene.EpisodeScene). Optional attributes:
+    `stops_when_still` (bool), `n_action_steps` (int), `image_steps` (int).
+    """
+
+    cloud_steps: int
+
+    def reset(self, scene: Any) -> None: ...
+
+    def plan(self, history: Any, scene: Any) -> Chunk | None: ...
 
 
 class Rollouts(Protocol):

@@ -25,7 +25,7 @@ from grits_lab.config import config_fingerprint, config_to_dict, require
 from grits_lab.errors import ConfigError, StorageError
 from grits_lab.io import ensure_writable_dir, write_text_atomic
 from grits_lab.policies.control import RolloutSettings, RolloutsFactory, rollout_episodes
-from grits_lab.policies.diffusion.dataset import DemoWindowDataset, dataset_fingerprint, list_demo_episodes, split_demo_episodes
+from grits_lab.policies.diffusion.demo_windows import DemoWindowDataset, dataset_fingerprint, list_demo_episodes, split_demo_episodes
 from grits_lab.training import (
     EMA, MetricLogger, load_checkpoint, require_finite_loss, resolve_device, save_checkpoint, set_torch_threads,
     warmup_cosine,

@@ -5,7 +5,7 @@ records, without torch, Ray or PyBullet.
 """
 
 from grits_lab.report.build import ReportResult, build_report, default_out_dir
-from grits_lab.report.loading import RunData, load_run, normalize_records
+from grits_lab.report.run_records import RunData, load_run, normalize_records
 from grits_lab.intervals import Rate, rate, wilson_interval
 
 __all__ = [

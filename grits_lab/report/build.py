@@ -22,7 +22,7 @@ from typing import Any, Callable
 
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
 from grits_lab.report import figures
-from grits_lab.report.loading import RunData, load_run
+from grits_lab.report.run_records import RunData, load_run
 from grits_lab.report.provenance import episode_counts, error_messages, report_provenance
 from grits_lab.report.guidance_effect import guidance_by_plan_table, guidance_figure, guidance_table, guided_episodes
 from grits_lab.report.headline import headline_sentence, headline_table

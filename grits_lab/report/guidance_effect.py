@@ -1,6 +1,6 @@
 """What guidance did, per method: distributions of P(spill) before and after guidance and of the guidance displacement.
 
-Read from the per-episode guidance columns of the evaluation records (grits_lab/evaluation/episode.py,
+Read from the per-episode guidance columns of the evaluation records (grits_lab/evaluation/task_episode.py,
 `summarize_guidance`): `p_spill_before` (the predictor's P(spill) of the plan's first guided
 estimate, mean over the episode's plans), `p_spill_after` (after the last guided update) and
 `guidance_displacement` (norm of the summed guidance updates of a plan, in normalized action

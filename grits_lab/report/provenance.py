@@ -13,7 +13,7 @@ from typing import Any
 
 import pandas as pd
 
-from grits_lab.report.loading import RunData
+from grits_lab.report.run_records import RunData
 from grits_lab.versions import git_commit, package_versions
 
 def seed_summary(episodes: pd.DataFrame | None) -> dict[str, Any]:

@@ -3,7 +3,7 @@
 An evaluation record holds everything that decides its episode: the seed, the method, the food
 and level, the guidance setting (rho, s) and the digests of the checkpoints; the run directory's
 `config.yaml` holds the rest. `replay_episode` re-runs the very episode in this process with the
-same code path as `grits-lab evaluate` (grits_lab/evaluation/episode.py), compares every recorded
+same code path as `grits-lab evaluate` (grits_lab/evaluation/task_episode.py), compares every recorded
 metric with the replayed one (exact equality; clocks excluded) and, when asked, renders a frame
 from the video camera after the reset and after every action, captioned with method, food,
 level, step and the spilled count. Rendering reads the simulator and never changes it, so the
@@ -98,7 +98,7 @@ def _equal(recorded: Any, replayed: Any) -> bool:
 
 def load_record(run_dir: str | Path, *, method: str, food: str, level: str, trial: int) -> dict[str, Any]:
     """The one record of (method, food, level, trial) in RUN_DIR/episodes.parquet; InputError if none or several."""
-    from grits_lab.evaluation.run import RECORDS_FILE
+    from grits_lab.evaluation.evaluation_run import RECORDS_FILE
 
     path = Path(run_dir) / RECORDS_FILE
     if not path.is_file():
@@ -122,7 +122,7 @@ def load_run_config(run_dir: str | Path, record: dict[str, Any]) -> Any:
     """RUN_DIR/config.yaml as an EvaluationConfig, with the record's guidance setting (rho, s) put in."""
     from grits_lab.config import config_from_dict, load_yaml
     from grits_lab.errors import ConfigError
-    from grits_lab.evaluation.config import EvaluationConfig
+    from grits_lab.evaluation.evaluation_config import EvaluationConfig
     from grits_lab.evaluation.methods import METHODS
 
     path = Path(run_dir) / "config.yaml"
@@ -204,9 +204,9 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
     """
     import torch
 
-    from grits_lab.evaluation.episode import run_task_episode
+    from grits_lab.evaluation.task_episode import run_task_episode
     from grits_lab.evaluation.methods import METHODS, build_controller
-    from grits_lab.perception.scene import builder_for_env
+    from grits_lab.perception.env_clouds import builder_for_env
     from grits_lab.sim.env import ScoopEnv
     from grits_lab.sim.video import VIDEO_CAMERA, check_video_path, write_video
 

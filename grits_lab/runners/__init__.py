@@ -7,7 +7,7 @@ importing this package (and the CLI's --help) stays fast.
 from __future__ import annotations
 
 from grits_lab.runners.base import Executor
-from grits_lab.runners.config import ExecutorConfig, make_executor
+from grits_lab.runners.executor_config import ExecutorConfig, make_executor
 from grits_lab.runners.serial import SerialExecutor
 from grits_lab.runners.spec import EpisodeResult, EpisodeSpec
 from grits_lab.runners.work import WorkerContext, execute_spec, probe_episode

@@ -46,7 +46,7 @@ _LOST_WORKER = (RayActorError, ActorUnavailableError)
 
 def _connect(address: str, kwargs: dict[str, Any]) -> None:
     """ray.init on an existing cluster, with one clear line when that fails."""
-    from grits_lab.runners.config import check_reachable
+    from grits_lab.runners.executor_config import check_reachable
 
     check_reachable(address)  # Ray retries an unreachable address for minutes
     try:

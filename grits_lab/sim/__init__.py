@@ -8,22 +8,39 @@ from typing import Any
 
 import gymnasium
 
-from grits_lab.lazy import lazy_exports
+from grits_lab.sim.env import SceneGeometry, ScoopEnv, matrix_to_pose9, pose9_to_matrix
+from grits_lab.sim.expert import expert_trajectory, nominal_expert_trajectory
+from grits_lab.sim.foods import FoodLibrary, FoodSpec, ParticleComponent, ParticleRanges, load_foods, primitive_food
+from grits_lab.sim.gym_env import ENV_ID, ScoopGymEnv
+from grits_lab.sim.playback import EpisodeRecord, load_trajectory, play_episode, play_trajectory, validate_trajectory
+from grits_lab.sim.sim_config import CameraConfig, SimConfig
 
-__getattr__, __dir__, __all__ = lazy_exports(__name__, {
-    "config": ["CameraConfig", "SimConfig"],
-    "env": ["SceneGeometry", "ScoopEnv", "matrix_to_pose9", "pose9_to_matrix"],
-    "episode": ["EpisodeRecord", "load_trajectory", "play_episode", "play_trajectory", "validate_trajectory"],
-    "expert": ["expert_trajectory", "nominal_expert_trajectory"],
-    "foods": ["FoodLibrary", "FoodSpec", "ParticleComponent", "ParticleRanges", "load_foods", "primitive_food"],
-    "gym_env": ["ENV_ID", "ScoopGymEnv"],
-})
+__all__ = [
+    "ENV_ID",
+    "CameraConfig",
+    "EpisodeRecord",
+    "FoodLibrary",
+    "FoodSpec",
+    "ParticleComponent",
+    "ParticleRanges",
+    "SceneGeometry",
+    "ScoopEnv",
+    "ScoopGymEnv",
+    "SimConfig",
+    "expert_trajectory",
+    "load_foods",
+    "load_trajectory",
+    "matrix_to_pose9",
+    "nominal_expert_trajectory",
+    "play_episode",
+    "play_trajectory",
+    "pose9_to_matrix",
+    "primitive_food",
+    "validate_trajectory",
+]
 
 
 def _make_scoop_gym_env(**kwargs: Any) -> Any:
-    # pybullet is imported when an env is made, not when the package is imported.
-    from grits_lab.sim.gym_env import ScoopGymEnv
-
     return ScoopGymEnv(**kwargs)
 
 

@@ -19,7 +19,7 @@ import numpy as np
 import pybullet as pb
 from pybullet_utils.bullet_client import BulletClient
 
-from grits_lab.sim.config import CameraConfig
+from grits_lab.sim.sim_config import CameraConfig
 
 
 @dataclass

@@ -20,9 +20,9 @@ from grits_lab.errors import InputError
 from grits_lab.geometry import matrix_to_rot6d, rot6d_to_matrix
 from grits_lab.seeding import derive_seed, make_rng
 from grits_lab.sim.cameras import CameraImage, render
-from grits_lab.sim.config import SimConfig
+from grits_lab.sim.sim_config import SimConfig
 from grits_lab.sim.foods import FoodSpec, level_count, load_foods, sample_particles
-from grits_lab.sim.metrics import COVERAGE_THRESHOLD, SpillTracker, classify, fill_height, spoon_coverage, spoon_outside_bowl
+from grits_lab.sim.spill_metrics import COVERAGE_THRESHOLD, SpillTracker, classify, fill_height, spoon_coverage, spoon_outside_bowl
 from grits_lab.sim.robot import REST_POSE, PandaKinematics, pose_to_matrix, spoon_in_hand
 from grits_lab.sim.shapes import TARGET_BOWL, BowlGeometry, SpoonGeometry
 from grits_lab.sim.world import World, build_world, settle
@@ -270,7 +270,7 @@ class ScoopEnv:
         return fill_height(w.particle_positions(), tops, w.source_bowl_position, w.source_geometry)
 
     def metrics(self) -> dict[str, Any]:
-        """Scoop metrics of the current state (counts of particles; see grits_lab.sim.metrics)."""
+        """Scoop metrics of the current state (counts of particles; see grits_lab.sim.spill_metrics)."""
         w = self._require_world()
         positions = w.particle_positions()
         counts = self._classify(positions)

@@ -31,7 +31,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from grits_lab.sim.config import SimConfig
+from grits_lab.sim.sim_config import SimConfig
 from grits_lab.sim.env import DEFAULT_FOOD, ScoopEnv
 
 ENV_ID = "grits_lab/Scoop-v0"

@@ -13,7 +13,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from grits_lab.errors import InputError
-from grits_lab.sim.config import CameraConfig
+from grits_lab.sim.sim_config import CameraConfig
 
 # Above the table's far edge, looking back at the robot: the source bowl, all four corners of the
 # rectangle the target bowl is drawn in (35 x 30 cm centred at (0.45, 0.28)) and the spoon's path

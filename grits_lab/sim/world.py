@@ -17,7 +17,7 @@ import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
 
 from grits_lab.sim.bullet import connect_direct
-from grits_lab.sim.config import SimConfig
+from grits_lab.sim.sim_config import SimConfig
 from grits_lab.sim.foods import SampledParticles
 from grits_lab.sim.robot import (
     ARM_FORCES,

@@ -1,10 +1,21 @@
 """The spillage predictor f_spillage(A_t, P_t) -> P(spill): encoders, model, training and the guidance objective."""
 
-from grits_lab.lazy import lazy_exports
+from grits_lab.spillage.guidance_objective import SpillageObjective, policy_to_predictor_affine, to_predictor_space
+from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
+from grits_lab.spillage.predictor_checkpoint import TrainedPredictor, load_predictor, save_predictor
+from grits_lab.spillage.predictor_config import PredictorConfig, PredictorDataConfig, PredictorModelConfig, PredictorTrainConfig
 
-__getattr__, __dir__, __all__ = lazy_exports(__name__, {
-    "checkpoint": ["TrainedPredictor", "load_predictor", "save_predictor"],
-    "config": ["PredictorConfig", "PredictorDataConfig", "PredictorModelConfig", "PredictorTrainConfig"],
-    "guidance_objective": ["SpillageObjective", "policy_to_predictor_affine", "to_predictor_space"],
-    "model": ["CloudNormalizer", "SpillagePredictor"],
-})
+__all__ = [
+    "CloudNormalizer",
+    "PredictorConfig",
+    "PredictorDataConfig",
+    "PredictorModelConfig",
+    "PredictorTrainConfig",
+    "SpillageObjective",
+    "SpillagePredictor",
+    "TrainedPredictor",
+    "load_predictor",
+    "policy_to_predictor_affine",
+    "save_predictor",
+    "to_predictor_space",
+]

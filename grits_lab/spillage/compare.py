@@ -17,7 +17,7 @@ import pandas as pd
 
 from grits_lab.errors import InputError
 from grits_lab.io import atomic_path, ensure_writable_dir, save_parquet_atomic, write_json_atomic, write_text_atomic
-from grits_lab.spillage.metrics import classification_report, paired_bootstrap, reliability_bins
+from grits_lab.spillage.classifier_metrics import classification_report, paired_bootstrap, reliability_bins
 
 
 @dataclass
@@ -57,8 +57,8 @@ def compare_predictions(predictions: pd.DataFrame, models: list[str], n_resample
 
 def predict_all(checkpoints: dict[str, Path], dataset_dir: str | Path) -> pd.DataFrame:
     """Every checkpoint's P(spill) on every chunk of `dataset_dir`, side by side (checks they align)."""
-    from grits_lab.spillage.checkpoint import load_predictor
-    from grits_lab.spillage.training import predict_chunks
+    from grits_lab.spillage.predictor_checkpoint import load_predictor
+    from grits_lab.spillage.predictor_training import predict_chunks
 
     merged: pd.DataFrame | None = None
     for name, path in checkpoints.items():

@@ -15,7 +15,7 @@ import torch
 
 from grits_lab.data.normalize import MinMaxNormalizer
 from grits_lab.errors import InputError
-from grits_lab.spillage.checkpoint import TrainedPredictor
+from grits_lab.spillage.predictor_checkpoint import TrainedPredictor
 
 
 def policy_to_predictor_affine(policy_normalizer: MinMaxNormalizer | None, predictor: TrainedPredictor) -> tuple[torch.Tensor, torch.Tensor]:

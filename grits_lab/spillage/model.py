@@ -17,8 +17,8 @@ from torch import nn
 
 from grits_lab.errors import InputError, StorageError
 from grits_lab.perception.composite import CLOUD_OBJECTS
-from grits_lab.spillage.config import PredictorModelConfig
-from grits_lab.spillage.encoders import DP3Encoder, PointNet2Encoder
+from grits_lab.spillage.predictor_config import PredictorModelConfig
+from grits_lab.spillage.cloud_encoders import DP3Encoder, PointNet2Encoder
 
 N_OBJECTS = len(CLOUD_OBJECTS)  # objects of the composite cloud (food, spoon, bowl)
 BOWL = CLOUD_OBJECTS.index("bowl")  # the source bowl's index in the cloud

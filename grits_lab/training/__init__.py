@@ -1,6 +1,6 @@
 """Generic training utilities shared by the policy and the predictor: device, EMA, LR schedule, checkpoints, logs."""
 
-from grits_lab.training.checkpoint import load_checkpoint, save_checkpoint
+from grits_lab.training.checkpoints import load_checkpoint, save_checkpoint
 from grits_lab.training.device import resolve_device, set_torch_threads
 from grits_lab.training.ema import EMA
 from grits_lab.training.metrics_log import MetricLogger, require_finite_loss

@@ -3,7 +3,7 @@
 The sweep sits above evaluation and calls it directly: the evaluation config is loaded once, the
 validation episodes are evaluation `EpisodeKey`s (the sweep's validation block is an evaluation
 episode grid with its own root seed, so no tuning episode is a test episode: `StudyConfig.episodes`),
-and each trial runs `grits_lab.evaluation.run.evaluate_guidance` with its (rho, s), getting one
+and each trial runs `grits_lab.evaluation.evaluation_run.evaluate_guidance` with its (rho, s), getting one
 evaluation record per episode (columns of grits_lab/records.py). Running GRITS goes through
 `GritsEvaluator`; besides it, grits_lab.tune reads only the episode grid and the evaluation
 config's food library from the evaluation layer.
@@ -16,11 +16,11 @@ from pathlib import Path
 import pandas as pd
 
 from grits_lab.errors import ConfigError, InputError
-from grits_lab.evaluation.config import EvaluationConfig, load_evaluation_config
+from grits_lab.evaluation.evaluation_config import EvaluationConfig, load_evaluation_config
 from grits_lab.evaluation.methods import METHODS, check_method_checkpoints, method_checkpoints
-from grits_lab.evaluation.run import evaluate_guidance
-from grits_lab.runners.config import check_reachable, cluster_address
-from grits_lab.tune.config import StudyConfig
+from grits_lab.evaluation.evaluation_run import evaluate_guidance
+from grits_lab.runners.executor_config import check_reachable, cluster_address
+from grits_lab.tune.study_config import StudyConfig
 
 
 class GritsEvaluator:

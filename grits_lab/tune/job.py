@@ -6,7 +6,7 @@ import dataclasses
 import sys
 from typing import Any
 
-from grits_lab.tune.config import StudyConfig
+from grits_lab.tune.study_config import StudyConfig
 
 
 def run_sweep(config: StudyConfig, n_trials: int | None = None, storage: str | None = None,

@@ -16,7 +16,7 @@ import pandas as pd
 from grits_lab.errors import InputError
 from grits_lab.evaluation.grid import EpisodeKey
 from grits_lab.records import RECORD_COLUMNS
-from grits_lab.tune.config import ObjectiveConfig, StudyConfig
+from grits_lab.tune.study_config import ObjectiveConfig, StudyConfig
 
 
 class EpisodeEvaluator(Protocol):

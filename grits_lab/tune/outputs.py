@@ -17,7 +17,7 @@ import yaml
 from optuna.trial import FrozenTrial, TrialState
 
 from grits_lab.io import save_parquet_atomic, write_json_atomic, write_text_atomic
-from grits_lab.tune.config import StudyConfig
+from grits_lab.tune.study_config import StudyConfig
 from grits_lab.tune.study import (
     ENQUEUED_ATTR, ERROR_ATTR, REQUEUED_ATTR, RETRY_OF_ATTR, WORKER_ATTR,
 )

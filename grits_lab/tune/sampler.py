@@ -17,7 +17,7 @@ from optuna.samplers import BaseSampler
 from optuna.trial import FrozenTrial, TrialState
 
 from grits_lab.seeding import derive_seed
-from grits_lab.tune.config import SamplerConfig
+from grits_lab.tune.study_config import SamplerConfig
 
 SPILLAGE_RATE_ATTR = "spillage_rate"
 

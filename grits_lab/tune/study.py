@@ -29,7 +29,7 @@ from optuna.trial import FrozenTrial, TrialState
 
 from grits_lab.errors import ConfigError, GritsError
 from grits_lab.io import save_parquet_atomic
-from grits_lab.tune.config import StudyConfig
+from grits_lab.tune.study_config import StudyConfig
 from grits_lab.tune.objective import EpisodeEvaluator, check_records, objective_values, summarize_records
 from grits_lab.tune.sampler import build_sampler
 

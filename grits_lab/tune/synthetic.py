@@ -18,7 +18,7 @@ import pandas as pd
 
 from grits_lab.evaluation.grid import EpisodeKey
 from grits_lab.seeding import derive_seed, make_rng
-from grits_lab.tune.config import SyntheticConfig
+from grits_lab.tune.study_config import SyntheticConfig
 
 # The evaluation's DDIM schedule (paper: 16 denoising steps over T = 100 training steps).
 _DDIM_STEPS = 16

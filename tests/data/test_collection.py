@@ -114,7 +114,7 @@ def test_resume_after_interruption_gives_the_uninterrupted_dataset(tmp_path, mon
             return super().poll(timeout)
 
     second = _short_spillage_config(tmp_path, output_dir=str(tmp_path / "spill2"))
-    import grits_lab.runners.config as runner_config
+    import grits_lab.runners.executor_config as runner_config
 
     with monkeypatch.context() as m:  # the job is stopped (as by Ctrl-C) after its first episode
         m.setattr(runner_config, "make_executor", lambda cfg: Interrupt())

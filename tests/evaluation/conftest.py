@@ -16,7 +16,7 @@ from grits_lab.sim import SimConfig
 from grits_lab.sim.env import scene_geometry
 from grits_lab.sim.expert import expert_trajectory
 
-from eval_helpers import N_POINTS  # noqa: E402  (shared with the config builder)
+from tests.evaluation.eval_helpers import N_POINTS  # noqa: E402  (shared with the config builder)
 
 
 def _clouds(rng: np.random.Generator, poses: np.ndarray, bowl: np.ndarray, food_top: float) -> np.ndarray:
@@ -70,10 +70,10 @@ def write_spillage(root: Path, demos: Path, n: int = 16) -> Path:
 @pytest.fixture(scope="session")
 def models(tmp_path_factory) -> dict[str, str]:
     """Paths of tiny trained checkpoints: diffusion policy, BC policy, predictor; and the demos."""
-    from grits_lab.policies.bc.training import BCTrainConfig, train_bc
-    from grits_lab.policies.diffusion.training import PolicyTrainConfig, train_policy
-    from grits_lab.spillage.config import PredictorConfig
-    from grits_lab.spillage.training import train_predictor
+    from grits_lab.policies.bc.training_bc import BCTrainConfig, train_bc
+    from grits_lab.policies.diffusion.training_diffusion import PolicyTrainConfig, train_policy
+    from grits_lab.spillage.predictor_config import PredictorConfig
+    from grits_lab.spillage.predictor_training import train_predictor
 
     torch.set_num_threads(1)
     root = tmp_path_factory.mktemp("eval-models")
@@ -108,8 +108,8 @@ def models(tmp_path_factory) -> dict[str, str]:
 @pytest.fixture(scope="session")
 def recorded_run(models, tmp_path_factory):
     """A recorded `grits-lab evaluate` run directory: dp and grits on one episode; (run_dir, records)."""
-    from eval_helpers import eval_config
-    from grits_lab.evaluation.run import evaluate
+    from tests.evaluation.eval_helpers import eval_config
+    from grits_lab.evaluation.evaluation_run import evaluate
 
     config = eval_config(models, tmp_path_factory.mktemp("recorded-run"), methods=["dp", "grits"])
     records = evaluate(config, progress=False)

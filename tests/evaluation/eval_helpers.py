@@ -11,7 +11,7 @@ TIMING = ["wall_time_s", "scoop_time_s", "transfer_time_s", "plan_time_mean_s", 
 
 def eval_config(models: dict[str, str], tmp: Path, **changes):
     """A small evaluation config: a few-particle training food, short scoops, serial executor."""
-    from grits_lab.evaluation.config import EvaluationConfig
+    from grits_lab.evaluation.evaluation_config import EvaluationConfig
 
     data = {
         "run_id": "test", "output_dir": str(tmp), "seed": 3, "methods": ["dp"], "foods": ["chocolate_balls"], "levels": ["low"],

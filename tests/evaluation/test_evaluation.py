@@ -8,11 +8,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval_helpers import N_POINTS, eval_config
+from tests.evaluation.eval_helpers import N_POINTS, eval_config
 from grits_lab.errors import ConfigError
 from grits_lab.evaluation.controllers import ObsHistory
 from grits_lab.evaluation.methods import METHODS
-from grits_lab.evaluation.run import evaluate, evaluate_guidance
+from grits_lab.evaluation.evaluation_run import evaluate, evaluate_guidance
 from grits_lab.records import RECORD_COLUMNS
 from grits_lab.runners import SerialExecutor
 
@@ -103,7 +103,7 @@ def test_resume_skips_finished_episodes_and_gives_the_same_table(models, tmp_pat
 
 
 def test_sweep_entry_point_evaluates_the_given_episodes_with_the_given_guidance(models, tmp_path):
-    from grits_lab.evaluation.run import EpisodeKey
+    from grits_lab.evaluation.evaluation_run import EpisodeKey
 
     config = eval_config(models, tmp_path / "run")
     keys = [EpisodeKey("chocolate_balls", "low", 0, 11, "train")]

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import pytest
-from eval_helpers import eval_config
+from tests.evaluation.eval_helpers import eval_config
 
 from grits_lab.errors import ConfigError
-from grits_lab.evaluation.run import evaluate
-from grits_lab.spillage.checkpoint import read_checkpoint
-from grits_lab.training.checkpoint import save_checkpoint
+from grits_lab.evaluation.evaluation_run import evaluate
+from grits_lab.spillage.predictor_checkpoint import read_checkpoint
+from grits_lab.training.checkpoints import save_checkpoint
 
 
 @pytest.mark.parametrize("stored_as", ["n_action_steps", "chunk_len"])  # chunk_len: checkpoints saved before the rename

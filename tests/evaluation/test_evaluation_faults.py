@@ -6,8 +6,8 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
-from eval_helpers import TIMING, eval_config  # noqa: E402
-from grits_lab.evaluation.run import evaluate  # noqa: E402
+from tests.evaluation.eval_helpers import TIMING, eval_config  # noqa: E402
+from grits_lab.evaluation.evaluation_run import evaluate  # noqa: E402
 
 pytestmark = pytest.mark.ray
 

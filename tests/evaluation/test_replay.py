@@ -12,7 +12,7 @@ import pytest
 from grits_lab.cli import main
 from grits_lab.errors import InputError, StorageError
 from grits_lab.report.replay import replay_episode
-from grits_lab.sim.config import CameraConfig
+from grits_lab.sim.sim_config import CameraConfig
 
 SMALL_CAMERA = CameraConfig(name="video", eye=(1.08, 0.14, 0.6), target=(0.47, 0.12, 0.07), fov_deg=50.0, width=96, height=72)
 

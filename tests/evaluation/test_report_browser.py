@@ -13,7 +13,7 @@ import pytest
 
 from grits_lab.report.replay import replay_episode
 from grits_lab.report import build_report
-from grits_lab.sim.config import CameraConfig
+from grits_lab.sim.sim_config import CameraConfig
 
 pytestmark = pytest.mark.browser
 

@@ -5,12 +5,12 @@ from __future__ import annotations
 import pandas as pd
 import torch
 
-from eval_helpers import N_POINTS
+from tests.evaluation.eval_helpers import N_POINTS
 from grits_lab.config import config_from_dict
 from grits_lab.evaluation.rollouts import ScoopRollouts
 from grits_lab.policies.control import RolloutSettings, rollout_episodes
 from grits_lab.policies.diffusion import DiffusionPolicy
-from grits_lab.policies.diffusion.training import PolicyTrainConfig, train_policy
+from grits_lab.policies.diffusion.training_diffusion import PolicyTrainConfig, train_policy
 
 ROLLOUT = {"every": 10, "episodes": 2, "scoop": {"max_steps": 24, "min_steps": 12, "settle_steps": 1},
            "cloud": {"n_points": N_POINTS, "cad_surface_samples": 1000}}

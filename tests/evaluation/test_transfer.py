@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from grits_lab.evaluation.scene import EpisodeScene
+from grits_lab.evaluation.episode_scene import EpisodeScene
 from grits_lab.evaluation.transfer import Obstacle, fit_circle, locate_bowl, path_is_clear, plan_transfer
 from grits_lab.perception.composite import CloudConfig
-from grits_lab.perception.scene import builder_for_env
+from grits_lab.perception.env_clouds import builder_for_env
 from grits_lab.sim import ScoopEnv, SimConfig
 
 

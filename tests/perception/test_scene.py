@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from grits_lab.perception import CloudConfig
-from grits_lab.perception.scene import builder_for_env, cad_meshes, scene_clouds
-from grits_lab.sim.config import SimConfig
+from grits_lab.perception.env_clouds import builder_for_env, cad_meshes, scene_clouds
+from grits_lab.sim.sim_config import SimConfig
 from grits_lab.sim.env import ScoopEnv
 from grits_lab.sim.shapes import BowlGeometry
 

@@ -9,8 +9,8 @@ import yaml
 
 from grits_lab.cli import main
 from grits_lab.errors import ConfigError
-from grits_lab.pipeline.config import load_pipeline_config
-from grits_lab.pipeline.run import STATE_FILE, run_pipeline
+from grits_lab.pipeline.pipeline_config import load_pipeline_config
+from grits_lab.pipeline.pipeline_run import STATE_FILE, run_pipeline
 
 
 def _write(path, data):

@@ -3,9 +3,9 @@
 import torch
 
 from grits_lab.config import config_from_dict
-from grits_lab.policies.bc.training import BCTrainConfig, train_bc
+from grits_lab.policies.bc.training_bc import BCTrainConfig, train_bc
 
-from test_diffusion_policy import TINY_POLICY
+from tests.policies.test_diffusion_policy import TINY_POLICY
 
 torch.set_num_threads(1)
 

@@ -8,8 +8,8 @@ import torch
 from grits_lab.config import config_from_dict
 from grits_lab.errors import ConfigError, InputError, StorageError
 from grits_lab.policies.diffusion import DiffusionPolicy, DiffusionPolicyConfig
-from grits_lab.policies.diffusion.dataset import DemoWindowDataset, list_demo_episodes, split_demo_episodes
-from grits_lab.policies.diffusion.training import PolicyTrainConfig, train_policy
+from grits_lab.policies.diffusion.demo_windows import DemoWindowDataset, list_demo_episodes, split_demo_episodes
+from grits_lab.policies.diffusion.training_diffusion import PolicyTrainConfig, train_policy
 from grits_lab.sampling import DDIMSampler, GuidanceConfig
 
 torch.set_num_threads(1)

@@ -16,7 +16,7 @@ from grits_lab.report import build_report, load_run, normalize_records, wilson_i
 from grits_lab.report.sweep import summarize_sweep
 from grits_lab.report.tables import claims_table, method_table, per_food_table
 from grits_lab.report.vocabulary import MAIN_METHODS, MISSING
-from synthetic_records import episode, plausible_run
+from tests.report.synthetic_records import episode, plausible_run
 
 
 def fixed_records() -> pd.DataFrame:

@@ -11,7 +11,7 @@ import pytest
 
 from grits_lab.report import build_report, normalize_records
 from grits_lab.report.videos import choose_episodes, film_picks
-from synthetic_records import episode, plausible_run
+from tests.report.synthetic_records import episode, plausible_run
 
 
 @pytest.fixture(scope="module")

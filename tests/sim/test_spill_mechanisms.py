@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from grits_lab.sim.metrics import SPILL_MECHANISMS, ParticleCounts, SpillTracker
+from grits_lab.sim.spill_metrics import SPILL_MECHANISMS, ParticleCounts, SpillTracker
 
 
 def _counts(in_spoon, outside, in_target=None, in_source=None):

@@ -11,7 +11,7 @@ import yaml
 
 from grits_lab.cli import main
 from grits_lab.spillage.compare import compare_predictions
-from grits_lab.spillage.metrics import auroc, classification_report, paired_bootstrap
+from grits_lab.spillage.classifier_metrics import auroc, classification_report, paired_bootstrap
 
 
 def _predictions(n_episodes=40, chunks=6, seed=0):

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from grits_lab.spillage.config import DP3EncoderConfig, PointNet2EncoderConfig, SetAbstractionConfig
-from grits_lab.spillage.encoders import DP3Encoder, PointNet2Encoder, ball_query, farthest_point_indices
+from grits_lab.spillage.predictor_config import DP3EncoderConfig, PointNet2EncoderConfig, SetAbstractionConfig
+from grits_lab.spillage.cloud_encoders import DP3Encoder, PointNet2Encoder, ball_query, farthest_point_indices
 
 
 def _cloud(b=2, n=64, seed=0):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from grits_lab.spillage.metrics import accuracy, auroc, expected_calibration_error
+from grits_lab.spillage.classifier_metrics import accuracy, auroc, expected_calibration_error
 
 
 def test_auroc_matches_pair_counting_with_ties():

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from grits_lab.spillage.config import PointNet2EncoderConfig, PredictorModelConfig, SetAbstractionConfig
+from grits_lab.spillage.predictor_config import PointNet2EncoderConfig, PredictorModelConfig, SetAbstractionConfig
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
 
 SMALL_PN2 = PointNet2EncoderConfig(levels=[SetAbstractionConfig(16, 1.0, 8, (16,))], global_mlp=(32,), out_dim=16)

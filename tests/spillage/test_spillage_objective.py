@@ -9,8 +9,8 @@ import torch
 from grits_lab.config import config_from_dict
 from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import InputError
-from grits_lab.spillage.checkpoint import TrainedPredictor
-from grits_lab.spillage.config import PredictorConfig
+from grits_lab.spillage.predictor_checkpoint import TrainedPredictor
+from grits_lab.spillage.predictor_config import PredictorConfig
 from grits_lab.spillage.guidance_objective import SpillageObjective
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
 

@@ -13,10 +13,10 @@ from grits_lab.cli import main
 from grits_lab.config import config_from_dict
 from grits_lab.data.format import load_index
 from grits_lab.errors import ConfigError, InputError
-from grits_lab.spillage.checkpoint import load_predictor
-from grits_lab.spillage.config import PredictorConfig
-from grits_lab.spillage.dataset import split_spillage_episodes, trajectory_window
-from grits_lab.spillage.training import evaluate_predictor, train_predictor
+from grits_lab.spillage.predictor_checkpoint import load_predictor
+from grits_lab.spillage.predictor_config import PredictorConfig
+from grits_lab.spillage.chunk_dataset import split_spillage_episodes, trajectory_window
+from grits_lab.spillage.predictor_training import evaluate_predictor, train_predictor
 
 
 def _config(tmp_path, dataset, epochs=2, **model):
@@ -127,8 +127,8 @@ def test_a_predictor_chunk_length_the_dataset_was_not_collected_with_is_refused_
 
 def test_a_checkpoint_saved_before_the_chunk_length_took_the_policys_name_loads_and_resumes(tmp_path, tiny_dataset):
     from grits_lab.config import config_fingerprint, config_to_dict
-    from grits_lab.spillage.checkpoint import load_predictor, read_checkpoint
-    from grits_lab.training.checkpoint import save_checkpoint
+    from grits_lab.spillage.predictor_checkpoint import load_predictor, read_checkpoint
+    from grits_lab.training.checkpoints import save_checkpoint
 
     cfg = _config(tmp_path, tiny_dataset, epochs=1)
     train_predictor(cfg, progress=False)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from sweep_helpers import free_port
+from tests.tune.sweep_helpers import free_port
 
 
 @pytest.fixture

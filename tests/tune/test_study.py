@@ -13,7 +13,7 @@ import yaml
 from optuna.trial import TrialState
 
 from grits_lab.errors import InputError
-from grits_lab.tune.config import load_study_config
+from grits_lab.tune.study_config import load_study_config
 from grits_lab.tune.objective import check_records, make_evaluator
 from grits_lab.tune.outputs import write_outputs
 from grits_lab.tune.storage import open_storage

@@ -6,7 +6,7 @@ import time
 
 import pytest
 import yaml
-from sweep_helpers import free_port
+from tests.tune.sweep_helpers import free_port
 
 from grits_lab.cli import main
 from grits_lab.errors import StorageError
@@ -106,7 +106,7 @@ def test_a_journal_with_a_torn_last_record_is_cut_back_and_the_sweep_resumes(swe
 ])
 def test_validation_names_the_food_library_lacks_are_refused_before_the_study_exists(
         sweep_file, tmp_path, capsys, validation, key, name):
-    from sweep_helpers import REPO
+    from tests.tune.sweep_helpers import REPO
 
     config = sweep_file(evaluator="grits", validation=validation,
                         evaluation={"config": str(REPO / "experiments" / "evaluate_quick.yaml"), "checkpoints": []})

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from grits_lab.errors import ConfigError
-from grits_lab.tune.config import load_study_config
-from sweep_helpers import REPO
+from grits_lab.tune.study_config import load_study_config
+from tests.tune.sweep_helpers import REPO
 
 
 @pytest.mark.parametrize("name", ["grits_quick", "grits_paper", "synthetic_standin"])

@@ -13,9 +13,9 @@ import time
 
 import pytest
 from optuna.trial import TrialState
-from sweep_helpers import REPO, sweep_command
+from tests.tune.sweep_helpers import REPO, sweep_command
 
-from grits_lab.tune.config import load_study_config
+from grits_lab.tune.study_config import load_study_config
 from grits_lab.tune.storage import open_storage
 from grits_lab.tune.study import REQUEUED_ATTR, RETRY_OF_ATTR, WORKER_ATTR
 

@@ -1,8 +1,6 @@
 """Behavior cloning baseline: observation encoder features -> MLP -> the next action chunk (deterministic regression)."""
 
-from grits_lab.lazy import lazy_exports
+from grits_lab.policies.bc.configuration_bc import BCConfig
+from grits_lab.policies.bc.modeling_bc import BCPolicy
 
-__getattr__, __dir__, __all__ = lazy_exports(__name__, {
-    "configuration_bc": ["BCConfig"],
-    "modeling_bc": ["BCPolicy"],
-})
+__all__ = ["BCConfig", "BCPolicy"]

@@ -19,7 +19,7 @@ from torch import nn
 from grits_lab.config import config_from_dict, config_to_dict
 from grits_lab.data.normalize import ActionNormalizer, MinMaxNormalizer
 from grits_lab.policies.bc.configuration_bc import BCConfig
-from grits_lab.policies.diffusion.encoders import PointCloudEncoder, RGBDEncoder
+from grits_lab.policies.diffusion.obs_encoders import PointCloudEncoder, RGBDEncoder
 from grits_lab.policies.diffusion.modeling_diffusion import DiffusionPolicy, encoder_obs_keys
 
 

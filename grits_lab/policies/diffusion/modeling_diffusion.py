@@ -23,7 +23,7 @@ from grits_lab.config import config_from_dict, config_to_dict
 from grits_lab.data.normalize import ActionNormalizer, MinMaxNormalizer
 from grits_lab.errors import InputError
 from grits_lab.policies.diffusion.configuration_diffusion import DiffusionPolicyConfig
-from grits_lab.policies.diffusion.encoders import PointCloudEncoder, RGBDEncoder, rgbd_to_unit
+from grits_lab.policies.diffusion.obs_encoders import PointCloudEncoder, RGBDEncoder, rgbd_to_unit
 from grits_lab.policies.diffusion.unet import ConditionalUnet1D
 from grits_lab.sampling import DDIMSampler, DDIMScheduler, Objective, Sampler, SampleResult
 

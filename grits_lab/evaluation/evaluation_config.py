@@ -17,8 +17,8 @@ from grits_lab.errors import ConfigError
 from grits_lab.evaluation.grid import EpisodeGrid
 from grits_lab.perception.composite import CloudConfig
 from grits_lab.policies.control import ScoopSettings
-from grits_lab.runners.config import ExecutorConfig
-from grits_lab.sim.config import SimConfig
+from grits_lab.runners.executor_config import ExecutorConfig
+from grits_lab.sim.sim_config import SimConfig
 
 
 @dataclass

@@ -18,17 +18,24 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from grits_lab.evaluation.controllers import ObsHistory, is_still
-from grits_lab.evaluation.scene import EpisodeScene
+from grits_lab.evaluation.episode_scene import EpisodeScene
 from grits_lab.evaluation.transfer import Obstacle, locate_bowl, plan_transfer, pour_motion
 from grits_lab.sim.env import matrix_to_pose9
 
+if TYPE_CHECKING:  # annotations only: no import cost, no cycle
+    from grits_lab.evaluation.evaluation_config import EvaluationConfig, TransferSettings
+    from grits_lab.perception.composite import CloudBuilder
+    from grits_lab.policies.control import Controller, ScoopSettings
+    from grits_lab.runners import EpisodeSpec, WorkerContext
+    from grits_lab.sim.env import ScoopEnv
 
-def run_scoop(env: Any, controller: Any, scene: EpisodeScene, history: ObsHistory, settings: Any,
+
+def run_scoop(env: ScoopEnv, controller: Controller, scene: EpisodeScene, history: ObsHistory, settings: ScoopSettings,
               record_chunks: bool = False) -> dict[str, Any]:
     """Stage 1; returns the scoop's measurements, guidance diagnostics and timings.
 
@@ -181,7 +188,7 @@ def summarize_guidance(diagnostics: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def run_transfer(env: Any, scene: EpisodeScene, settings: Any) -> dict[str, Any]:
+def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings) -> dict[str, Any]:
     """Stages 2 and 3: locate the target, carry the spoon level, pour, settle; returns the measurements."""
     target = locate_bowl(scene.object_points("target_bowl"))
     truth = np.asarray(env.target_bowl_pose(), dtype=np.float64)[:3, 3]
@@ -218,7 +225,7 @@ def run_transfer(env: Any, scene: EpisodeScene, settings: Any) -> dict[str, Any]
     }
 
 
-def begin_episode(env: Any, builder: Any, *, seed: int, food: str, level: str) -> tuple[EpisodeScene, ObsHistory]:
+def begin_episode(env: ScoopEnv, builder: CloudBuilder, *, seed: int, food: str, level: str) -> tuple[EpisodeScene, ObsHistory]:
     """Reset the env for (food, level, seed); the scene's sensors and the history holding the first observation."""
     obs, _ = env.reset(seed=int(seed), options={"food": food, "level": level})
     history = ObsHistory()
@@ -226,7 +233,8 @@ def begin_episode(env: Any, builder: Any, *, seed: int, food: str, level: str) -
     return EpisodeScene(env, builder, seed), history
 
 
-def run_task_episode(env: Any, controller: Any, config: Any, *, seed: int, food: str, level: str, builder: Any) -> dict[str, Any]:
+def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationConfig, *, seed: int, food: str, level: str,
+                     builder: CloudBuilder) -> dict[str, Any]:
     """The whole task for one (method, food, level, seed); returns the metric part of the record.
 
     With `config.rollout_chunks`, the record also holds "_chunks": the scoop as a spillage-dataset
@@ -287,12 +295,12 @@ def run_task_episode(env: Any, controller: Any, config: Any, *, seed: int, food:
     return record
 
 
-def evaluation_episode(spec: Any, context: Any) -> dict[str, Any]:
+def evaluation_episode(spec: EpisodeSpec, context: WorkerContext) -> dict[str, Any]:
     """Work function (grits_lab/runners): one evaluation episode in a worker; models cached per worker."""
     import torch
 
     from grits_lab.evaluation.methods import METHODS, build_controller, guidance_columns
-    from grits_lab.perception.scene import builder_for_env
+    from grits_lab.perception.env_clouds import builder_for_env
     from grits_lab.sim.env import worker_env
 
     start = time.perf_counter()

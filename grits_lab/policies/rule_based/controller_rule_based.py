@@ -57,7 +57,7 @@ class RuleBasedController:
         self.done = False
         self.measured = {}
 
-    def plan(self, history: Any, scene: Any) -> Any:
+    def plan(self, history: Any, scene: Any) -> Chunk | None:
         from grits_lab.policies.control import Chunk
 
         if self.done:

@@ -25,8 +25,8 @@ from tqdm import tqdm
 
 from grits_lab.config import config_fingerprint, config_to_dict
 from grits_lab.errors import InputError, StorageError
-from grits_lab.evaluation.config import EvaluationConfig, load_evaluation_config
-from grits_lab.evaluation.episode import evaluation_episode
+from grits_lab.evaluation.evaluation_config import EvaluationConfig, load_evaluation_config
+from grits_lab.evaluation.task_episode import evaluation_episode
 from grits_lab.evaluation.grid import EpisodeKey
 from grits_lab.evaluation.methods import (
     METHODS, check_method_checkpoints, file_digest, guidance_columns, method_checkpoints,
@@ -35,7 +35,7 @@ from grits_lab.io import ensure_writable_dir, save_parquet_atomic, write_json_at
 from grits_lab.records import RECORD_COLUMNS
 from grits_lab.runners import EpisodeResult, EpisodeSpec, make_executor
 from grits_lab.runners.base import Executor
-from grits_lab.runners.config import check_reachable, cluster_address
+from grits_lab.runners.executor_config import check_reachable, cluster_address
 
 RECORDS_FILE = "episodes.parquet"
 IDENTITY = ("method", "food", "level", "trial", "seed", "rho", "s")

@@ -230,7 +230,7 @@ class StudyConfig:
 
         if self.evaluator == "synthetic":
             return load_foods()
-        from grits_lab.evaluation.config import load_evaluation_config
+        from grits_lab.evaluation.evaluation_config import load_evaluation_config
 
         if not Path(str(self.evaluation.config)).is_file():
             raise InputError(f"evaluation config not found: {self.evaluation.config} (set `evaluation.config` in the sweep file)")

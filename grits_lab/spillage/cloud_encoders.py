@@ -13,7 +13,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from grits_lab.spillage.config import DP3EncoderConfig, PointNet2EncoderConfig
+from grits_lab.spillage.predictor_config import DP3EncoderConfig, PointNet2EncoderConfig
 
 
 def _check_cloud(cloud: torch.Tensor, n_objects: int) -> None:

@@ -7,17 +7,21 @@ that both ask for the current cloud pay for one render. Nothing here changes the
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from grits_lab.perception.clouds import object_points
 from grits_lab.perception.composite import CloudBuilder
-from grits_lab.perception.scene import camera_list, scene_clouds
+from grits_lab.perception.env_clouds import camera_list, scene_clouds
 from grits_lab.seeding import derive_seed
 
+if TYPE_CHECKING:  # annotations only
+    from grits_lab.sim.cameras import CameraImage
+    from grits_lab.sim.shapes import BowlGeometry, SpoonGeometry
 
-def camera_dicts(rendered: Any) -> list[dict[str, np.ndarray]]:
+
+def camera_dicts(rendered: dict[str, CameraImage]) -> list[dict[str, np.ndarray]]:
     """The env's CameraImage objects as the dicts perception reads (stable camera order)."""
     out = []
     for cam in camera_list(rendered):
@@ -97,10 +101,10 @@ class EpisodeScene:
     def source_bowl_position(self) -> np.ndarray:
         return np.asarray(self.env.source_bowl_pose(), dtype=np.float64)[:3, 3].copy()
 
-    def source_geometry(self) -> Any:
+    def source_geometry(self) -> BowlGeometry:
         return self.env.world.source_geometry
 
-    def spoon_geometry(self) -> Any:
+    def spoon_geometry(self) -> SpoonGeometry:
         return self.env.world.spoon_geometry
 
     def spoon_pose(self) -> np.ndarray:

@@ -20,14 +20,14 @@ from typing import Any
 
 import numpy as np
 
-from grits_lab.policies.rule_based.controller import pitch_pose
+from grits_lab.policies.rule_based.controller_rule_based import pitch_pose
 
 
 def scoop_prior(demos_dir: str | Path) -> np.ndarray:
     """(T, 9) mean commanded trajectory of the demonstrations (time-normalized; grits_lab.data.trajectories)."""
     from grits_lab.data.format import read_episode
     from grits_lab.data.trajectories import mean_trajectory
-    from grits_lab.policies.diffusion.dataset import list_demo_episodes
+    from grits_lab.policies.diffusion.demo_windows import list_demo_episodes
 
     ids = list_demo_episodes(demos_dir)
     actions = [read_episode(Path(demos_dir) / "episodes" / f"{e}.npz", keys=["action"])[0]["action"] for e in ids]
@@ -82,7 +82,7 @@ class SconeController:
         pitch = math.radians(40.0)
         return pitch_pose(np.array([bowl[0], bowl[1], z + half * math.sin(pitch)]), pitch)
 
-    def plan(self, history: Any, scene: Any) -> Any:
+    def plan(self, history: Any, scene: Any) -> Chunk | None:
         from grits_lab.policies.control import Chunk
 
         s = self.settings

@@ -18,9 +18,9 @@ from grits_lab.config import config_from_dict, config_to_dict
 from grits_lab.data.format import with_chunk_key
 from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import ConfigError, StorageError
-from grits_lab.spillage.config import PredictorConfig
+from grits_lab.spillage.predictor_config import PredictorConfig
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
-from grits_lab.training.checkpoint import load_checkpoint, save_checkpoint
+from grits_lab.training.checkpoints import load_checkpoint, save_checkpoint
 
 CHECKPOINT_FORMAT = "grits-spillage-predictor/1"
 

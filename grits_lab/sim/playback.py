@@ -37,7 +37,7 @@ class EpisodeRecord:
     wall_time_s: float = 0.0
     target_bowl_xy: list[float] = field(default_factory=list)
     spilled_over_time: list[int] = field(default_factory=list)  # spilled count after each action
-    # Spilled particles by where they left from (grits_lab.sim.metrics.SpillTracker): over_rim,
+    # Spilled particles by where they left from (grits_lab.sim.spill_metrics.SpillTracker): over_rim,
     # off_spoon, elsewhere.
     spill_mechanisms: dict[str, int] = field(default_factory=dict)
     particle_parameters: list[dict[str, Any]] = field(default_factory=list)

@@ -21,7 +21,7 @@ import yaml
 
 from grits_lab.config import load_yaml, merge_mappings
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
-from grits_lab.pipeline.config import UPSTREAM, PipelineConfig
+from grits_lab.pipeline.pipeline_config import UPSTREAM, PipelineConfig
 from grits_lab.pipeline.stages import Layout, run, wire
 
 STATE_FILE = "pipeline_state.json"

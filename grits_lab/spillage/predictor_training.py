@@ -26,10 +26,10 @@ from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import ConfigError
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
 from grits_lab.seeding import derive_seed
-from grits_lab.spillage.checkpoint import TrainedPredictor, read_checkpoint, save_predictor
-from grits_lab.spillage.config import PredictorConfig
-from grits_lab.spillage.dataset import CLOUD_KEYS, SpillageChunkDataset, check_spillage_dataset, fit_normalizers, split_spillage_episodes
-from grits_lab.spillage.metrics import classification_report
+from grits_lab.spillage.predictor_checkpoint import TrainedPredictor, read_checkpoint, save_predictor
+from grits_lab.spillage.predictor_config import PredictorConfig
+from grits_lab.spillage.chunk_dataset import CLOUD_KEYS, SpillageChunkDataset, check_spillage_dataset, fit_normalizers, split_spillage_episodes
+from grits_lab.spillage.classifier_metrics import classification_report
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
 from grits_lab.training.metrics_log import require_finite_loss
 
