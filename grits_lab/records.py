@@ -7,6 +7,12 @@ still fail to scoop), as in the paper.
 
 from __future__ import annotations
 
+# The paper's ten unseen test foods in its order (SPEC "Foods"), as named in grits_lab/sim/foods.yaml:
+# the evaluation's default foods and the order of every per-food table and figure.
+UNSEEN_FOODS: tuple[str, ...] = (
+    "sago", "red_bean", "mentos", "marshmallow", "fudge", "penne", "prune", "ramen_snack", "nuts", "milk_tea",
+)
+
 # name -> meaning. Every evaluation record has at least these columns.
 RECORD_COLUMNS: dict[str, str] = {
     "run_id": "identifier of the evaluation or sweep run that produced the row",

@@ -13,15 +13,12 @@ from typing import TYPE_CHECKING
 
 from grits_lab.config import require
 from grits_lab.errors import ConfigError
+from grits_lab.records import UNSEEN_FOODS
 from grits_lab.seeding import derive_seed
 
 if TYPE_CHECKING:
     from grits_lab.sim.foods import FoodLibrary
 
-# The paper's ten unseen test foods (SPEC "Foods"), as named in grits_lab/sim/foods.yaml.
-UNSEEN_FOODS = [
-    "sago", "red_bean", "mentos", "marshmallow", "fudge", "penne", "prune", "ramen_snack", "nuts", "milk_tea",
-]
 
 
 @dataclass(frozen=True)

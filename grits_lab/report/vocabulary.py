@@ -6,6 +6,8 @@ real-robot numbers of the paper) is defined once here so that every table and fi
 
 from __future__ import annotations
 
+from grits_lab.records import UNSEEN_FOODS
+
 METHOD_NAMES: dict[str, str] = {
     "rule_based": "Rule-based",
     "bc": "Behavior cloning",
@@ -24,20 +26,8 @@ ABLATION_METHODS = ("grits_raw", "grits_pointnet2", "grits")
 # Paper Fig. 6: vanilla diffusion policy (left) against GRITS (right).
 PER_FOOD_METHODS = ("dp", "grits")
 
-# The ten unseen test foods in the paper's order, with the abbreviations of its Fig. 6.
-FOOD_ABBREVIATIONS: dict[str, str] = {
-    "sago": "SA",
-    "red_bean": "RB",
-    "mentos": "MT",
-    "marshmallow": "MM",
-    "fudge": "FD",
-    "penne": "PE",
-    "prune": "PR",
-    "ramen_snack": "RS",
-    "nuts": "NU",
-    "milk_tea": "MK",
-}
-UNSEEN_FOODS = tuple(FOOD_ABBREVIATIONS)
+# The ten unseen test foods (grits_lab/records.py, the paper's order) with the abbreviations of its Fig. 6.
+FOOD_ABBREVIATIONS: dict[str, str] = dict(zip(UNSEEN_FOODS, ("SA", "RB", "MT", "MM", "FD", "PE", "PR", "RS", "NU", "MK")))
 
 LEVEL_ORDER = ("low", "medium", "high")
 
