@@ -4,8 +4,6 @@ No torch and no Ray here: everything runs in a plain process, one PyBullet clien
 Importing this package registers the Gymnasium env "grits_lab/Scoop-v0" (grits_lab/sim/gym_env.py).
 """
 
-from typing import Any
-
 import gymnasium
 
 from grits_lab.sim.env import SceneGeometry, ScoopEnv, matrix_to_pose9, pose9_to_matrix
@@ -40,9 +38,5 @@ __all__ = [
 ]
 
 
-def _make_scoop_gym_env(**kwargs: Any) -> Any:
-    return ScoopGymEnv(**kwargs)
-
-
-if "grits_lab/Scoop-v0" not in gymnasium.registry:
-    gymnasium.register(id="grits_lab/Scoop-v0", entry_point=_make_scoop_gym_env, max_episode_steps=None)
+if ENV_ID not in gymnasium.registry:
+    gymnasium.register(id=ENV_ID, entry_point=ScoopGymEnv, max_episode_steps=None)
