@@ -1,8 +1,9 @@
-"""A study's outputs: trials table (CSV, Parquet), best parameters (YAML), summary, Pareto and importance plots.
+"""A study's outputs: trials table (CSV, Parquet), best parameters and the Pareto front (YAML), summary, plots.
 
 Everything here is recomputed from the storage, so `grits-lab sweep --report-only` regenerates
-the outputs of a study run by other machines. The best-parameter file holds only the
-`guidance: {rho, s}` section, which `grits-lab evaluate` takes as an override.
+the outputs of a study run by other machines. The best-parameter file, and each Pareto-front
+trial's file under `front/`, hold only the `guidance: {rho, s}` section, which `grits-lab
+evaluate` takes as an override.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ METRIC_ATTRS = ("success_rate", "spillage_rate", "scoop_failure_rate", "n_episod
 def trials_frame(study: optuna.Study, config: StudyConfig) -> pd.DataFrame:
     """One row per trial in the study, in trial-number order."""
     names = config.objective.value_names
+    front = {t.number for t in pareto_front(scored_trials(study))}
     rows = []
     for t in study.get_trials(deepcopy=False):
         row = {"number": t.number, "state": t.state.name,
@@ -37,6 +39,7 @@ def trials_frame(study: optuna.Study, config: StudyConfig) -> pd.DataFrame:
         for key in METRIC_ATTRS:
             row[key] = t.user_attrs.get(key, math.nan)
         row["feasible"] = _feasible(t, config)
+        row["pareto_front"] = t.number in front
         row["enqueued"] = bool(t.user_attrs.get(ENQUEUED_ATTR, False))
         row["retry_of"] = t.user_attrs.get(RETRY_OF_ATTR, -1)
         row["requeued"] = bool(t.user_attrs.get(REQUEUED_ATTR, False))
@@ -72,6 +75,12 @@ def pareto_front(trials: list[FrozenTrial]) -> list[FrozenTrial]:
     return [t for t in trials if not any(dominates(o, t) for o in trials if o is not t)]
 
 
+def scored_trials(study: optuna.Study) -> list[FrozenTrial]:
+    """Completed trials that carry their rates (the ones a front or a best choice is made from)."""
+    return [t for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
+            if "success_rate" in t.user_attrs]
+
+
 def best_trial(study: optuna.Study, config: StudyConfig) -> tuple[FrozenTrial | None, str]:
     """The trial whose (rho, s) the sweep recommends, and a note on how it was chosen.
 
@@ -79,8 +88,7 @@ def best_trial(study: optuna.Study, config: StudyConfig) -> tuple[FrozenTrial | 
     choice is made on the Pareto front; ties in success - spillage_weight * spillage go to the
     earlier trial.
     """
-    complete = [t for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
-                if "success_rate" in t.user_attrs]
+    complete = scored_trials(study)
     if not complete:
         return None, "no completed trial yet"
     pool, note = complete, f"highest success - {config.objective.spillage_weight:g} * spillage"
@@ -125,6 +133,8 @@ def write_outputs(study: optuna.Study, config: StudyConfig, out_dir: Path, stora
     defaults = default_trial(study, config)
     if best is not None:
         write_text_atomic(out_dir / "best.yaml", _best_yaml(config, best, defaults, how, evaluator_label))
+    front = sorted(pareto_front(scored_trials(study)), key=lambda t: t.number)
+    _write_front(config, front, out_dir / "front", evaluator_label)
     summary = {
         "study_name": config.study_name,
         "storage": storage_description,
@@ -136,6 +146,7 @@ def write_outputs(study: optuna.Study, config: StudyConfig, out_dir: Path, stora
         "best": _metrics(best),
         "best_rule": how,
         "defaults": _metrics(defaults),
+        "pareto_front": [_metrics(t) for t in front],
         "dashboard": f"optuna-dashboard {storage_description}",
         "notes": [],
     }
@@ -144,18 +155,43 @@ def write_outputs(study: optuna.Study, config: StudyConfig, out_dir: Path, stora
         summary["notes"].append(plot_importance(study, config, out_dir / "importance.png"))
     summary["notes"] = [n for n in summary["notes"] if n]
     # Only what this call wrote: a plot skipped now, or left from an earlier run, is not named.
-    summary["files"] = [name for name in ("trials.csv", "trials.parquet", "best.yaml", "pareto.png", "importance.png")
+    summary["files"] = [name for name in ("trials.csv", "trials.parquet", "best.yaml", "front", "pareto.png", "importance.png")
                         if (out_dir / name).exists() and (out_dir / name).stat().st_mtime >= started - 1.0] + ["summary.json"]
     write_json_atomic(out_dir / "summary.json", summary)
     return summary
 
 
-def _best_yaml(config: StudyConfig, best: FrozenTrial, defaults: FrozenTrial | None, how: str, label: str) -> str:
-    def line(t: FrozenTrial) -> str:
-        a = t.user_attrs
-        return (f"success {a['success_rate']:.3f}, spillage {a['spillage_rate']:.3f}, "
-                f"scoop failure {a['scoop_failure_rate']:.3f} over {a['n_episodes']} episodes")
+def _rates_line(t: FrozenTrial) -> str:
+    a = t.user_attrs
+    return (f"success {a['success_rate']:.3f}, spillage {a['spillage_rate']:.3f}, "
+            f"scoop failure {a['scoop_failure_rate']:.3f} over {a['n_episodes']} episodes")
 
+
+def _guidance_override(header: list[str], trial: FrozenTrial) -> str:
+    """`# header` lines, then `guidance: {rho, s}` of `trial`: an override for `grits-lab evaluate --override`."""
+    body = yaml.safe_dump({"guidance": {"rho": float(trial.params["rho"]), "s": int(trial.params["s"])}},
+                          sort_keys=False)
+    return "\n".join(header) + "\n" + body
+
+
+def _write_front(config: StudyConfig, front: list[FrozenTrial], folder: Path, label: str) -> None:
+    """One override per Pareto-front trial, `front/trial_NNNNN.yaml`; files of trials no longer on it go."""
+    keep = set()
+    for t in front:
+        name = f"trial_{t.number:05d}.yaml"
+        keep.add(name)
+        header = [f"# Pareto-front trial {t.number} of sweep `{config.study_name}` (maximize success, minimize spillage).",
+                  f"# Evaluator: {label}.", f"# This trial: {_rates_line(t)}.",
+                  "# Pass it to `grits-lab evaluate` as an override of the evaluation config's guidance section."]
+        write_text_atomic(folder / name, _guidance_override(header, t))
+    if folder.is_dir():
+        for stale in folder.glob("trial_*.yaml"):
+            if stale.name not in keep:
+                stale.unlink()
+
+
+def _best_yaml(config: StudyConfig, best: FrozenTrial, defaults: FrozenTrial | None, how: str, label: str) -> str:
+    line = _rates_line
     header = [
         f"# Best guidance of sweep `{config.study_name}`: trial {best.number} ({how}).",
         f"# Evaluator: {label}.",
@@ -165,9 +201,7 @@ def _best_yaml(config: StudyConfig, best: FrozenTrial, defaults: FrozenTrial | N
         header.append(f"# Paper defaults rho={defaults.params['rho']:g} s={defaults.params['s']} "
                       f"(trial {defaults.number}): {line(defaults)}.")
     header.append("# Pass it to `grits-lab evaluate` as an override of the evaluation config's guidance section.")
-    body = yaml.safe_dump({"guidance": {"rho": float(best.params["rho"]), "s": int(best.params["s"])}},
-                          sort_keys=False)
-    return "\n".join(header) + "\n" + body
+    return _guidance_override(header, best)
 
 
 def plot_tradeoff(study: optuna.Study, config: StudyConfig, path: Path, label: str) -> str:
@@ -177,8 +211,7 @@ def plot_tradeoff(study: optuna.Study, config: StudyConfig, path: Path, label: s
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    complete = [t for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
-                if "success_rate" in t.user_attrs]
+    complete = scored_trials(study)
     if not complete:
         return "pareto.png not written: no completed trial"
     fig, ax = plt.subplots(figsize=(6, 4.5), dpi=120)

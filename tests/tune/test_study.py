@@ -140,6 +140,32 @@ def test_outputs_best_yaml_is_a_guidance_override(sweep_file, tmp_path):
     assert summary["defaults"]["trial"] == 0 and summary["best"]["n_episodes"] == 8
 
 
+def test_outputs_hold_one_override_per_pareto_front_trial(sweep_file, tmp_path):
+    config = load_study_config(sweep_file(n_trials=8, objective={"mode": "multi"}))
+    study, _ = run_study(config, tmp_path / "j.log")
+    out = tmp_path / "out"
+    (out / "front").mkdir(parents=True)
+    (out / "front" / "trial_99999.yaml").write_text("guidance: {rho: 1.0, s: 30}\n")  # a trial no longer on the front
+    summary = write_outputs(study, config, out, "j.log", "synthetic", plots=False)
+    table = pd.read_parquet(out / "trials.parquet")
+    done = table[table["state"] == "COMPLETE"]
+
+    def dominated(row):
+        better = (done["success_rate"] >= row.success_rate) & (done["spillage_rate"] <= row.spillage_rate)
+        strictly = (done["success_rate"] > row.success_rate) | (done["spillage_rate"] < row.spillage_rate)
+        return bool((better & strictly).any())
+
+    expected = sorted(int(row.number) for row in done.itertuples() if not dominated(row))
+    assert expected and len(expected) < len(done)  # the synthetic trade-off leaves some trials dominated
+    assert sorted(table.loc[table["pareto_front"], "number"]) == expected
+    assert sorted(p.name for p in (out / "front").iterdir()) == [f"trial_{n:05d}.yaml" for n in expected]
+    for n in expected:
+        override = yaml.safe_load((out / "front" / f"trial_{n:05d}.yaml").read_text())
+        row = table.set_index("number").loc[n]
+        assert override == {"guidance": {"rho": pytest.approx(row.rho), "s": int(row.s)}}
+    assert [t["trial"] for t in summary["pareto_front"]] == expected
+
+
 def test_importance_with_one_trial_is_skipped_with_a_note(sweep_file, tmp_path):
     config = load_study_config(sweep_file(n_trials=1))
     study, _ = run_study(config, tmp_path / "j.log")
