@@ -1,4 +1,4 @@
-"""`grits-lab report RUN_DIR [--output-dir DIR] [--videos N]`: the paper's tables and figures from a run's records, optionally with replayed episodes."""
+"""`grits-lab report RUN_DIR [OTHER_RUN ...] [--output-dir DIR] [--videos N]`: the paper's tables and figures from a run's records, optionally with replayed episodes."""
 
 from __future__ import annotations
 
@@ -18,6 +18,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
     )
     parser.add_argument("run_dir", metavar="RUN_DIR", help="evaluation or sweep run directory (or one .parquet file of records)")
+    parser.add_argument("also", metavar="OTHER_RUN", nargs="*",
+                        help="more evaluation run directories whose records are reported beside RUN_DIR's, e.g. GRITS at a "
+                             "sweep's tuned (rho, s) beside the paper's; a method run at several (rho, s) gets one row per setting")
     add_flag(parser, "--output-dir", deprecated=("--out",), metavar="DIR", default=None, help="output directory (default: RUN_DIR/report)")
     parser.add_argument("--videos", metavar="N", type=int, default=0,
                         help="replay up to N episodes per food under Diffusion Policy and GRITS (same seed) and show the videos "
@@ -34,6 +37,8 @@ def _run(args: argparse.Namespace) -> int:
     replay = None
     if args.videos < 0:
         raise InputError(f"--videos must be 0 or more. Got {args.videos}.")
+    if args.videos and args.also:
+        raise InputError("--videos replays episodes of one run directory; give RUN_DIR alone")
     if args.videos:
         from grits_lab.report.replay import replay_episode
 
@@ -42,7 +47,7 @@ def _run(args: argparse.Namespace) -> int:
         if missing:
             raise InputError(f"--videos replays episodes from a `grits-lab evaluate` run directory; {run_dir} lacks {', '.join(missing)}")
         replay = replay_episode
-    result = build_report(args.run_dir, args.output_dir, videos=args.videos, replay=replay)
+    result = build_report(args.run_dir, args.output_dir, also=args.also, videos=args.videos, replay=replay)
     print(f"report written to {result.out_dir} ({len(result.files)} files): {result.out_dir / 'report.html'}")
     for note in result.missing:
         print(f"  {note}")

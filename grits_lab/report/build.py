@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
 from grits_lab.report import figures
@@ -64,9 +64,12 @@ def default_out_dir(run_dir: str | Path) -> Path:
     return (run_dir if run_dir.is_dir() else run_dir.parent) / "report"
 
 
-def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, videos: int = 0,
-                 replay: Callable[..., Any] | None = None) -> ReportResult:
+def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also: Sequence[str | Path] = (),
+                 videos: int = 0, replay: Callable[..., Any] | None = None) -> ReportResult:
     """Write the report of RUN_DIR into `out_dir` (default RUN_DIR/report).
+
+    also: further run directories whose episode records are reported beside RUN_DIR's (a method
+    evaluated at several (rho, s) gets one row per setting; grits_lab/report/run_records.py).
 
     videos: replay up to this many episodes per food (grits_lab/report/videos.py has the rule)
     under Diffusion Policy and GRITS and show them side by side; `replay` is the function that
@@ -74,7 +77,7 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, vide
     With videos = 0 (the default) nothing is replayed and no simulator is needed.
     """
     out = Path(out_dir) if out_dir is not None else default_out_dir(run_dir)
-    run = load_run(run_dir, exclude=out)
+    run = load_run(run_dir, exclude=out, also=also)
     ensure_writable_dir(out)
     result = ReportResult(out)
     sections = _results_sections(run, out, result) + [_provenance_section(run, out, result)]
@@ -87,7 +90,8 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, vide
     overview = Section("Overview", [
         f"Simulated results of run {run.run_dir}, beside the paper's real-robot numbers where the paper states "
         f"them. Labels: '{SIM_LABEL}' for this run, '{PAPER_LABEL}' for the paper. Rates carry Wilson 95% "
-        "intervals and episode counts; a method or food without records is shown as — and listed below, never as zero.",
+        "intervals and episode counts; a method or food without records is shown as — and listed below, never as zero."
+        + (f" Records of {', '.join(str(p) for p in run.also_runs)} are reported beside this run's." if run.also_runs else ""),
         Collapsed(f"Missing data: {len(missing)} notes (click to list)", missing) if missing else "Missing data: none.",
     ])
     sections.insert(0, overview)

@@ -5,7 +5,8 @@ What the report expects in RUN_DIR (written by `grits-lab evaluate` and `grits-l
 * episode records, one row per episode with the columns of grits_lab/records.py, as Parquet:
   `episodes.parquet`, or several `*.parquet` shards, directly in RUN_DIR or in RUN_DIR/records/
   or RUN_DIR/episodes/ (RUN_DIR may also be a single .parquet file). Rows that appear in more
-  than one file (a consolidated file beside its shards) are counted once.
+  than one file (a consolidated file beside its shards) are counted once. Records of further run
+  directories can join them (`load_run(..., also=...)`, `grits-lab report RUN_DIR OTHER_RUN ...`).
 * optional run metadata: `config.yaml` (and any other *.yaml at the top level) and
   `provenance.json`, shown verbatim in the report's provenance section.
 * optional sweep outputs anywhere up to two folders below RUN_DIR: a trials table
@@ -22,7 +23,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import pandas as pd
 import yaml
@@ -46,6 +47,7 @@ class RunData:
     """Everything the report reads from a run directory."""
 
     run_dir: Path
+    also_runs: list[Path] = field(default_factory=list)  # further run directories whose records joined RUN_DIR's
     episodes: pd.DataFrame | None = None
     episode_files: list[Path] = field(default_factory=list)
     ignored_files: list[str] = field(default_factory=list)
@@ -59,23 +61,28 @@ class RunData:
     provenance: dict[str, Any] = field(default_factory=dict)
 
 
-def load_run(run_dir: str | Path, exclude: str | Path | None = None) -> RunData:
-    """Read RUN_DIR; `exclude` (the report's own output folder) is never searched for inputs."""
+def load_run(run_dir: str | Path, exclude: str | Path | None = None, also: Sequence[str | Path] = ()) -> RunData:
+    """Read RUN_DIR; `exclude` (the report's own output folder) is never searched for inputs.
+
+    `also`: more run directories (or .parquet files) whose episode records join RUN_DIR's, e.g. a
+    GRITS run at tuned (rho, s) beside the run with the paper's values; a method run at more than
+    one (rho, s) is reported once per setting. Configs, provenance and sweep tables come from
+    RUN_DIR only. Raises InputError when a directory is missing or `also` names one without records.
+    """
     run_dir = Path(run_dir)
-    if not run_dir.exists():
-        raise InputError(f"run directory not found: {run_dir}")
+    for path in (run_dir, *map(Path, also)):
+        if not path.exists():
+            raise InputError(f"run directory not found: {path}")
     excluded = Path(exclude).resolve() if exclude is not None else None
     data = RunData(run_dir=run_dir)
-    record_files = _record_files(run_dir, excluded)
-    frames = []
-    for path in record_files:
-        frame = _read_table(path)
-        missing = [c for c in REQUIRED_COLUMNS if c not in frame.columns]
-        if missing:
-            data.ignored_files.append(f"{path.name} (not episode records: lacks {', '.join(missing)})")
-            continue
-        data.episode_files.append(path)
-        frames.append(frame)
+    frames = _read_records(_record_files(run_dir, excluded), data)
+    for other in map(Path, also):
+        found = _read_records(_record_files(other, excluded), data)
+        if not found:
+            raise InputError(f"no episode records in {other}: expected episodes.parquet or *.parquet files with "
+                             f"columns {', '.join(REQUIRED_COLUMNS)}")
+        data.also_runs.append(other)
+        frames += found
     base = run_dir if run_dir.is_dir() else run_dir.parent
     data.trials_file = _find_trials(base, excluded)
     if data.trials_file is not None:
@@ -167,6 +174,20 @@ def _variants(frame: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
 def _setting_label(rho: float, s: int) -> str:
     rho_text = "none" if pd.isna(rho) else f"{rho:g}"
     return f"rho={rho_text}, s={int(s)}"
+
+
+def _read_records(files: list[Path], data: RunData) -> list[pd.DataFrame]:
+    """The episode-record tables among `files`; the others are listed in `data.ignored_files`."""
+    frames = []
+    for path in files:
+        frame = _read_table(path)
+        missing = [c for c in REQUIRED_COLUMNS if c not in frame.columns]
+        if missing:
+            data.ignored_files.append(f"{path.name} (not episode records: lacks {', '.join(missing)})")
+            continue
+        data.episode_files.append(path)
+        frames.append(frame)
+    return frames
 
 
 def _deduplicate(frame: pd.DataFrame) -> tuple[pd.DataFrame, int]:

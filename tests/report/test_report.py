@@ -186,3 +186,29 @@ def test_cli_on_a_full_disk_is_one_line_and_exit_2(built, tmp_path, full_disk, c
     assert main(["report", str(run), "--output-dir", str(tmp_path / "report")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no space left on device" in err[0]
+
+
+def test_runs_given_together_report_a_method_once_per_guidance_setting(tmp_path, capsys):
+    protocol, tuned, out = tmp_path / "protocol", tmp_path / "tuned", tmp_path / "out"
+    protocol.mkdir()
+    tuned.mkdir()
+    rows = [episode("dp", "sago", "low", t, "success" if t < 3 else "spill", run_id="protocol") for t in range(4)]
+    rows += [episode("grits", "sago", "low", t, "success" if t < 1 else "spill", run_id="protocol") for t in range(4)]
+    pd.DataFrame(rows).to_parquet(protocol / "episodes.parquet", index=False)
+    pd.DataFrame([episode("grits", "sago", "low", t, "success", rho=1.26, s=60, run_id="tuned")
+                  for t in range(4)]).to_parquet(tuned / "episodes.parquet", index=False)
+    assert main(["report", str(protocol), str(tuned), "--output-dir", str(out)]) == 0
+    fig5 = pd.read_csv(out / "csv" / "fig5_overall.csv").set_index("variant")
+    assert fig5.loc["dp", "task_success_k"] == 3
+    assert fig5.loc["grits[rho=2.5, s=30]", "task_success_k"] == 1
+    assert fig5.loc["grits[rho=1.26, s=60]", "task_success_k"] == 4
+    assert (fig5.loc[["dp", "grits[rho=2.5, s=30]", "grits[rho=1.26, s=60]"], "episodes"] == 4).all()
+    assert str(tuned) in (out / "report.md").read_text()
+    # A second run without records, or one that is not there, is one line before any work.
+    (tmp_path / "empty").mkdir()
+    for other, message in ((tmp_path / "empty", "no episode records"), (tmp_path / "nope", "run directory not found")):
+        assert main(["report", str(protocol), str(other), "--output-dir", str(tmp_path / "x")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and message in err and str(other) in err
+    assert main(["report", str(protocol), str(tuned), "--videos", "1"]) == 2
+    assert "one run directory" in capsys.readouterr().err
