@@ -42,6 +42,9 @@ CATEGORY_COLORS = {
 }
 
 
+VARIANT_HATCHES = ("", "//", "..", "xx", "\\\\")
+
+
 def method_color(method: str, fallback_index: int) -> tuple:
     return METHOD_COLORS.get(method, _PALETTE[(len(METHOD_COLORS) + fallback_index) % len(_PALETTE)])
 
@@ -52,11 +55,15 @@ def method_bars(data: pd.DataFrame, path: Path, title: str) -> Path:
     width = 0.8 / n_methods
     fig, ax = plt.subplots(figsize=(max(7.5, 1.0 + 1.1 * n_methods * len(OUTCOME_COLUMNS) * 0.45), 4.6))
     paper_drawn = False
+    settings_seen: dict[str, int] = {}
     for i, row in enumerate(data.itertuples(index=False)):
         row = row._asdict()
         x = np.arange(len(OUTCOME_COLUMNS)) + (i - (n_methods - 1) / 2) * width
         label = f"{row['method_name']} (n={row['episodes']})" if not row["missing"] else f"{row['method_name']} (missing)"
         color = method_color(row["method"], i)
+        # A method at several (rho, s) keeps its colour; its second, third... setting is hatched.
+        hatch = VARIANT_HATCHES[settings_seen.get(row["method"], 0) % len(VARIANT_HATCHES)]
+        settings_seen[row["method"]] = settings_seen.get(row["method"], 0) + 1
         for j, outcome in enumerate(OUTCOME_COLUMNS):
             value = row[f"{outcome}_rate"]
             if math.isnan(value):
@@ -64,6 +71,7 @@ def method_bars(data: pd.DataFrame, path: Path, title: str) -> Path:
                 continue
             low, high = row[f"{outcome}_ci_low"], row[f"{outcome}_ci_high"]
             ax.bar(x[j], 100 * value, width * 0.92, color=color, label=label if j == 0 else None,
+                   hatch=hatch, edgecolor="white" if hatch else None, linewidth=0,
                    yerr=[[100 * (value - low)], [100 * (high - value)]], capsize=2.5, error_kw={"lw": 0.9, "ecolor": "0.2"})
             ax.text(x[j], 100 * high + 1.2, f"{100 * value:.0f}", ha="center", va="bottom", fontsize=6.5)
             paper = row.get(f"{outcome}_paper", math.nan)
