@@ -21,7 +21,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--storage", default=None,
                         help="storage URL or journal file path (overrides `storage` in the file)")
     parser.add_argument("--report-only", action="store_true",
-                        help="run no trial; rewrite the tables, best.yaml and plots from the storage")
+                        help="run no trial; rewrite the tables, best.yaml, the front/ overrides and plots from the storage")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (one line per trial)")
     parser.set_defaults(handler=_run)

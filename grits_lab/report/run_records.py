@@ -67,23 +67,32 @@ def load_run(run_dir: str | Path, exclude: str | Path | None = None, also: Seque
     `also`: more run directories (or .parquet files) whose episode records join RUN_DIR's, e.g. a
     GRITS run at tuned (rho, s) beside the run with the paper's values; a method run at more than
     one (rho, s) is reported once per setting. Configs, provenance and sweep tables come from
-    RUN_DIR only. Raises InputError when a directory is missing or `also` names one without records.
+    RUN_DIR only. Raises InputError, before anything is written, when a run is missing, given twice,
+    inside the report's output folder, a sweep (with `also`), without records (in `also`), or when
+    two runs hold the same episode of the same method at the same (rho, s).
     """
     run_dir = Path(run_dir)
-    for path in (run_dir, *map(Path, also)):
-        if not path.exists():
-            raise InputError(f"run directory not found: {path}")
+    others = [Path(p) for p in also]
     excluded = Path(exclude).resolve() if exclude is not None else None
+    _check_inputs([run_dir, *others], excluded)
     data = RunData(run_dir=run_dir)
     frames = _read_records(_record_files(run_dir, excluded), data)
-    for other in map(Path, also):
+    base = run_dir if run_dir.is_dir() else run_dir.parent
+    if others and _find_trials(base, excluded) is not None:
+        raise InputError(f"{run_dir} is a sweep; several runs are reported together only as evaluation runs")
+    sources = [(run_dir, frames)]
+    for other in others:
+        if _find_trials(other if other.is_dir() else other.parent, excluded) is not None:
+            raise InputError(f"{other} is a sweep; give evaluation run directories after RUN_DIR")
         found = _read_records(_record_files(other, excluded), data)
         if not found:
             raise InputError(f"no episode records in {other}: expected episodes.parquet or *.parquet files with "
                              f"columns {', '.join(REQUIRED_COLUMNS)}")
         data.also_runs.append(other)
-        frames += found
-    base = run_dir if run_dir.is_dir() else run_dir.parent
+        sources.append((other, found))
+        frames = frames + found
+    if others:
+        _check_disjoint(sources)
     data.trials_file = _find_trials(base, excluded)
     if data.trials_file is not None:
         data.trials = _read_table(data.trials_file)
@@ -174,6 +183,39 @@ def _variants(frame: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
 def _setting_label(rho: float, s: int) -> str:
     rho_text = "none" if pd.isna(rho) else f"{rho:g}"
     return f"rho={rho_text}, s={int(s)}"
+
+
+def _check_inputs(paths: list[Path], excluded: Path | None) -> None:
+    seen: dict[Path, Path] = {}
+    for path in paths:
+        if not path.exists():
+            raise InputError(f"run directory not found: {path}")
+        resolved = path.resolve()
+        if resolved in seen:
+            raise InputError(f"{path} is given twice")
+        seen[resolved] = path
+        if excluded is not None and (resolved == excluded or excluded in resolved.parents):
+            raise InputError(f"{path} is inside the report's output directory {excluded}; choose another --output-dir")
+
+
+# An episode of one method at one guidance setting, whatever run wrote it.
+_EPISODE_KEY = ("method", "food", "level", "trial", "seed", "rho", "s")
+
+
+def _check_disjoint(sources: list[tuple[Path, list[pd.DataFrame]]]) -> None:
+    """Runs reported together must not hold the same episode twice (it would be counted twice or hidden)."""
+    owner: dict[tuple, Path] = {}
+    for path, frames in sources:
+        keys = set()
+        for frame in frames:
+            columns = [c for c in _EPISODE_KEY if c in frame.columns]
+            keys |= {tuple(zip(columns, row)) for row in frame[columns].astype(str).itertuples(index=False, name=None)}
+        for key in sorted(keys):
+            if key in owner:
+                episode = ", ".join(f"{column}={value}" for column, value in key)
+                raise InputError(f"{owner[key]} and {path} hold the same episode ({episode}); "
+                                 "report runs that share an episode one at a time")
+        owner.update(dict.fromkeys(keys, path))
 
 
 def _read_records(files: list[Path], data: RunData) -> list[pd.DataFrame]:

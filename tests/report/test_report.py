@@ -212,3 +212,31 @@ def test_runs_given_together_report_a_method_once_per_guidance_setting(tmp_path,
         assert err.count("\n") == 0 and message in err and str(other) in err
     assert main(["report", str(protocol), str(tuned), "--videos", "1"]) == 2
     assert "one run directory" in capsys.readouterr().err
+
+
+def test_runs_that_cannot_be_reported_together_are_refused_in_one_line(tmp_path, capsys):
+    first, second, sweep = tmp_path / "first", tmp_path / "second", tmp_path / "sweep"
+    for folder in (first, second, sweep):
+        folder.mkdir()
+    # The same run_id, as `grits-lab evaluate --output-dir` keeps it: the same DP episode in both runs.
+    pd.DataFrame([episode("dp", "sago", "low", 0, "success", run_id="evaluate")]).to_parquet(first / "episodes.parquet", index=False)
+    pd.DataFrame([episode("dp", "sago", "low", 0, "spill", run_id="evaluate"),
+                  episode("dp", "sago", "low", 1, "spill", run_id="evaluate")]).to_parquet(second / "episodes.parquet", index=False)
+    pd.DataFrame([episode("grits", "sago", "low", 0, "success", rho=1.0, s=30)]).to_parquet(sweep / "trial_00000.parquet", index=False)
+    pd.DataFrame({"number": [0], "state": ["COMPLETE"], "rho": [1.0], "s": [30],
+                  "success_rate": [1.0], "spillage_rate": [0.0]}).to_parquet(sweep / "trials.parquet", index=False)
+    out = tmp_path / "out"
+    cases = [
+        ([first, second], "hold the same episode"),
+        ([first, first], "given twice"),
+        ([first, sweep], "is a sweep"),
+        ([sweep, first], "is a sweep"),
+        ([first, out / "shard.parquet"], "inside the report's output directory"),
+    ]
+    out.mkdir()
+    pd.DataFrame([episode("bc", "sago", "low", 0, "success")]).to_parquet(out / "shard.parquet", index=False)
+    for runs, message in cases:
+        assert main(["report", *map(str, runs), "--output-dir", str(out)]) == 2, message
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and message in err
+    assert sorted(p.name for p in out.iterdir()) == ["shard.parquet"]  # nothing was written
