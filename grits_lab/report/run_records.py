@@ -194,8 +194,9 @@ def _check_inputs(paths: list[Path], excluded: Path | None) -> None:
         if resolved in seen:
             raise InputError(f"{path} is given twice")
         seen[resolved] = path
-        if excluded is not None and (resolved == excluded or excluded in resolved.parents):
-            raise InputError(f"{path} is inside the report's output directory {excluded}; choose another --output-dir")
+        # The report writes into its output folder: an input that is that folder, or a file in it, could be overwritten.
+        if excluded is not None and (resolved == excluded or (resolved.is_file() and excluded in resolved.parents)):
+            raise InputError(f"{path} is, or lies in, the report's output directory {excluded}; choose another --output-dir")
 
 
 # An episode of one method at one guidance setting, whatever run wrote it.

@@ -231,7 +231,7 @@ def test_runs_that_cannot_be_reported_together_are_refused_in_one_line(tmp_path,
         ([first, first], "given twice"),
         ([first, sweep], "is a sweep"),
         ([sweep, first], "is a sweep"),
-        ([first, out / "shard.parquet"], "inside the report's output directory"),
+        ([first, out / "shard.parquet"], "the report's output directory"),
     ]
     out.mkdir()
     pd.DataFrame([episode("bc", "sago", "low", 0, "success")]).to_parquet(out / "shard.parquet", index=False)
