@@ -173,15 +173,25 @@ def _variants(frame: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
         settings = rows[["rho", "s"]].drop_duplicates()
         if len(settings) <= 1:
             continue
+        digits = _label_digits(settings)
         for index, row in rows.iterrows():
-            label = _setting_label(row["rho"], row["s"])
+            label = _setting_label(row["rho"], row["s"], digits)
             variant.at[index] = f"{method}[{label}]"
             name.at[index] = f"{method_display(method)} ({label})"
     return variant, name
 
 
-def _setting_label(rho: float, s: int) -> str:
-    rho_text = "none" if pd.isna(rho) else f"{rho:g}"
+def _label_digits(settings: pd.DataFrame) -> int:
+    """The fewest significant digits of rho (3 or more) that keep every (rho, s) setting's label distinct."""
+    for digits in range(3, 18):
+        labels = {_setting_label(rho, s, digits) for rho, s in settings.itertuples(index=False)}
+        if len(labels) == len(settings):
+            return digits
+    return 17
+
+
+def _setting_label(rho: float, s: int, digits: int = 3) -> str:
+    rho_text = "none" if pd.isna(rho) else f"{rho:.{digits}g}"
     return f"rho={rho_text}, s={int(s)}"
 
 

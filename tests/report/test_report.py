@@ -204,6 +204,9 @@ def test_runs_given_together_report_a_method_once_per_guidance_setting(tmp_path,
     assert fig5.loc["grits[rho=1.26, s=60]", "task_success_k"] == 4
     assert (fig5.loc[["dp", "grits[rho=2.5, s=30]", "grits[rho=1.26, s=60]"], "episodes"] == 4).all()
     assert str(tuned) in (out / "report.md").read_text()
+    # Labels are short unless two settings need more digits to be told apart.
+    close = normalize_records(pd.DataFrame([episode("grits", "sago", "low", 0, "success", rho=r, s=30) for r in (1.26053, 1.26112, 0.955106)]))
+    assert sorted(set(close["variant_name"])) == ["GRITS (rho=0.95511, s=30)", "GRITS (rho=1.2605, s=30)", "GRITS (rho=1.2611, s=30)"]
     # A second run without records, or one that is not there, is one line before any work.
     (tmp_path / "empty").mkdir()
     for other, message in ((tmp_path / "empty", "no episode records"), (tmp_path / "nope", "run directory not found")):
