@@ -62,8 +62,9 @@ def method_bars(data: pd.DataFrame, path: Path, title: str) -> Path:
         label = f"{row['method_name']} (n={row['episodes']})" if not row["missing"] else f"{row['method_name']} (missing)"
         color = method_color(row["method"], i)
         # A method at several (rho, s) keeps its colour; its second, third... setting is hatched.
-        hatch = VARIANT_HATCHES[settings_seen.get(row["method"], 0) % len(VARIANT_HATCHES)]
-        settings_seen[row["method"]] = settings_seen.get(row["method"], 0) + 1
+        seen = settings_seen.get(row["method"], 0)
+        settings_seen[row["method"]] = seen + 1
+        hatch = VARIANT_HATCHES[seen % len(VARIANT_HATCHES)]
         for j, outcome in enumerate(OUTCOME_COLUMNS):
             value = row[f"{outcome}_rate"]
             if math.isnan(value):

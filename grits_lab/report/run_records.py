@@ -78,7 +78,8 @@ def load_run(run_dir: str | Path, exclude: str | Path | None = None, also: Seque
     data = RunData(run_dir=run_dir)
     frames = _read_records(_record_files(run_dir, excluded), data)
     base = run_dir if run_dir.is_dir() else run_dir.parent
-    if others and _find_trials(base, excluded) is not None:
+    data.trials_file = _find_trials(base, excluded)
+    if others and data.trials_file is not None:
         raise InputError(f"{run_dir} is a sweep; several runs are reported together only as evaluation runs")
     sources = [(run_dir, frames)]
     for other in others:
@@ -93,7 +94,6 @@ def load_run(run_dir: str | Path, exclude: str | Path | None = None, also: Seque
         frames = frames + found
     if others:
         _check_disjoint(sources)
-    data.trials_file = _find_trials(base, excluded)
     if data.trials_file is not None:
         data.trials = _read_table(data.trials_file)
         data.best_params_file = _find_best_params(data.trials_file.parent)
@@ -210,7 +210,7 @@ def _check_inputs(paths: list[Path], excluded: Path | None) -> None:
 
 
 # An episode of one method at one guidance setting, whatever run wrote it.
-_EPISODE_KEY = ("method", "food", "level", "trial", "seed", "rho", "s")
+_EPISODE_KEY = tuple(c for c in IDENTITY_COLUMNS if c != "run_id")
 
 
 def _check_disjoint(sources: list[tuple[Path, list[pd.DataFrame]]]) -> None:

@@ -168,10 +168,11 @@ def _rates_line(t: FrozenTrial) -> str:
 
 
 def _guidance_override(header: list[str], trial: FrozenTrial) -> str:
-    """`# header` lines, then `guidance: {rho, s}` of `trial`: an override for `grits-lab evaluate --override`."""
+    """`# header` lines and how to use the file, then `guidance: {rho, s}` of `trial`: an override for `grits-lab evaluate --override`."""
+    usage = "# Pass it to `grits-lab evaluate` as an override of the evaluation config's guidance section."
     body = yaml.safe_dump({"guidance": {"rho": float(trial.params["rho"]), "s": int(trial.params["s"])}},
                           sort_keys=False)
-    return "\n".join(header) + "\n" + body
+    return "\n".join([*header, usage]) + "\n" + body
 
 
 def _write_front(config: StudyConfig, front: list[FrozenTrial], folder: Path, label: str) -> None:
@@ -181,8 +182,7 @@ def _write_front(config: StudyConfig, front: list[FrozenTrial], folder: Path, la
         name = f"trial_{t.number:05d}.yaml"
         keep.add(name)
         header = [f"# Pareto-front trial {t.number} of sweep `{config.study_name}` (maximize success, minimize spillage).",
-                  f"# Evaluator: {label}.", f"# This trial: {_rates_line(t)}.",
-                  "# Pass it to `grits-lab evaluate` as an override of the evaluation config's guidance section."]
+                  f"# Evaluator: {label}.", f"# This trial: {_rates_line(t)}."]
         write_text_atomic(folder / name, _guidance_override(header, t))
     if folder.is_dir():
         for stale in folder.glob("trial_*.yaml"):
@@ -191,16 +191,14 @@ def _write_front(config: StudyConfig, front: list[FrozenTrial], folder: Path, la
 
 
 def _best_yaml(config: StudyConfig, best: FrozenTrial, defaults: FrozenTrial | None, how: str, label: str) -> str:
-    line = _rates_line
     header = [
         f"# Best guidance of sweep `{config.study_name}`: trial {best.number} ({how}).",
         f"# Evaluator: {label}.",
-        f"# This trial: {line(best)}.",
+        f"# This trial: {_rates_line(best)}.",
     ]
     if defaults is not None:
         header.append(f"# Paper defaults rho={defaults.params['rho']:g} s={defaults.params['s']} "
-                      f"(trial {defaults.number}): {line(defaults)}.")
-    header.append("# Pass it to `grits-lab evaluate` as an override of the evaluation config's guidance section.")
+                      f"(trial {defaults.number}): {_rates_line(defaults)}.")
     return _guidance_override(header, best)
 
 
