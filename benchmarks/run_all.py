@@ -43,6 +43,8 @@ def benchmark_commands(full: bool) -> dict[str, list[str]]:
         "predictor": [py, str(HERE / "bench_predictor.py"), "--repeats", "20" if full else "5"],
         "evaluation": [py, str(HERE / "bench_evaluation.py"), "--presets", *(["cpu", "paper"] if full else ["cpu"]),
                        "--repeats", "10" if full else "4", "--episodes", "4" if full else "2"],
+        # needs a demonstration dataset: grits-lab collect experiments/demos_quick.yaml
+        "data_parallel": [py, str(HERE / "bench_data_parallel.py"), "--steps", "300" if full else "100"],
     }
 
 
@@ -113,6 +115,9 @@ def headlines(name: str, result: dict) -> list[tuple[str, object]]:
     if name == "policy":
         return [(key, value) for key, value in result.items()
                 if key.startswith(("train_steps_per_s", "plan_ms_batch", "guided_x0_over_unguided"))]
+    if name == "data_parallel":
+        return [(f"policy training, processes x threads {layout}: steps/s (vs the first)", f"{run['steps_per_s']} ({run.get('speedup')}x)")
+                for layout, run in result.get("runs", {}).items()]
     if name == "predictor":
         return [(key, value) for key, value in result.items() if key.startswith("dp3_batch1")]
     if name == "evaluation":

@@ -9,6 +9,7 @@ AdamW's default betas.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -34,5 +35,5 @@ def load_bc_config(path: str | Path) -> BCTrainConfig:
 
 def train_bc(config: BCTrainConfig, max_steps: int | None = None, progress: bool = True, restart: bool = False) -> dict[str, Any]:
     """Train (or resume) the BC policy; returns a summary with the first and last training loss."""
-    return train_on_demonstrations(config, lambda: BCPolicy(config.policy), desc="train bc", max_steps=max_steps,
+    return train_on_demonstrations(config, partial(BCPolicy, config.policy), desc="train bc", max_steps=max_steps,
                                    progress=progress, restart=restart)

@@ -8,6 +8,7 @@ policy config, the EMA it is evaluated with, and scoops played during training.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +34,8 @@ class PolicyTrainConfig(DemoTrainConfig):
         super().__post_init__()
         require(self.rollout.every % self.log_every == 0, "rollout.every", self.rollout.every,
                 f"a multiple of log_every={self.log_every} (rates are logged with the losses)")
+        require(not (self.rollout.every and self.num_processes > 1), "rollout.every", self.rollout.every,
+                f"0 when num_processes is {self.num_processes} (scoops during training are played in one process)")
 
 
 def load_train_config(path: str | Path) -> PolicyTrainConfig:
@@ -47,5 +50,5 @@ def train_policy(config: PolicyTrainConfig, max_steps: int | None = None, progre
     run stopped and resumed ends where an uninterrupted one does). `rollouts` plays the training
     scoops when `config.rollout.every` > 0 (grits_lab.evaluation.rollouts.ScoopRollouts).
     """
-    return train_on_demonstrations(config, lambda: DiffusionPolicy(config.policy), desc="train policy", rollout=config.rollout, rollouts=rollouts,
+    return train_on_demonstrations(config, partial(DiffusionPolicy, config.policy), desc="train policy", rollout=config.rollout, rollouts=rollouts,
                                    max_steps=max_steps, progress=progress, restart=restart)
