@@ -11,6 +11,7 @@ as an uninterrupted one.
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass
 from typing import Any, Callable
@@ -112,21 +113,22 @@ def train_on_demonstrations(
     `rollouts(rollout, episodes)` builds the player of the training scoops (the simulator's is
     grits_lab.evaluation.rollouts.ScoopRollouts, handed in by the caller above this layer) and
     they are played every `rollout.every` steps. Raises ConfigError when rollouts are asked for
-    and no player was handed in, or when `num_processes` > 1 asks for a GPU. `max_steps`
+    and no player was handed in. `max_steps`
     stops the run early; the LR schedule still spans the config's `max_steps`.
 
-    With `num_processes` > 1 the steps run data-parallel in that many processes
+    With `num_processes` > 1 and a CPU device the steps run data-parallel in that many processes
     (grits_lab/training/data_parallel.py); `make_policy` must then pickle (a functools.partial of
-    the policy class, not a lambda).
+    the policy class, not a lambda). On a GPU one process trains, with one line on stderr.
     """
     if rollout is not None and rollout.every and rollouts is None:
         raise ConfigError("`rollout.every` asks for scoops during training, but no rollout player was handed to the "
                           "training loop (train through `grits-lab train policy` or the pipeline, which hand in the simulator's)")
-    if config.num_processes == 1:
+    device = resolve_device(config.device)
+    if config.num_processes > 1 and device.type != "cpu":
+        print(f"num_processes: {config.num_processes} splits batches over CPU cores; training in one process on {device}",
+              file=sys.stderr)
+    if config.num_processes == 1 or device.type != "cpu":
         return _train(0, 1, config, make_policy, desc, rollout, rollouts, max_steps, progress, restart)
-    if resolve_device(config.device).type != "cpu":
-        raise ConfigError(f"num_processes: {config.num_processes} splits each batch over CPU processes; on "
-                          f"{resolve_device(config.device)} use num_processes: 1")
     list_demo_episodes(config.dataset, tuple(config.splits))  # a missing dataset fails here, before processes start
     out = ensure_writable_dir(config.output_dir)
     return run_processes(_train, config.num_processes, (config, make_policy, desc, None, None, max_steps, progress, restart), out)
