@@ -39,7 +39,7 @@ TRIALS_FILES = ("trials.parquet", "trials.csv")
 NOT_RECORD_FILES = {"trials.parquet", "index.parquet"}
 MAX_CONFIG_CHARS = 20_000
 # Columns that identify one episode; a row seen twice with the same identity is a duplicate.
-IDENTITY_COLUMNS = ("run_id", "method", "food", "level", "trial", "seed", "rho", "s")
+IDENTITY_COLUMNS = ("run_id", "method", "food", "level", "trial", "seed", "rho", "s", "checkpoint_predictor")
 
 
 @dataclass
@@ -117,8 +117,9 @@ def load_run(run_dir: str | Path, exclude: str | Path | None = None, also: Seque
 def normalize_records(frame: pd.DataFrame) -> pd.DataFrame:
     """Typed copy of raw records, with `is_error`, `food_key` and the method `variant` added.
 
-    A method evaluated at more than one guidance setting (rho, s) is split into variants, one
-    per setting, so that rows from different settings are never pooled into one rate.
+    A method evaluated at more than one guidance setting (rho, s), or guided by more than one
+    predictor checkpoint (`checkpoint_predictor`, its digest), is split into variants, one per
+    combination, so that rows from different settings or predictors are never pooled into one rate.
     """
     frame = frame.copy()
     missing = [c for c in REQUIRED_COLUMNS if c not in frame.columns]
@@ -167,15 +168,22 @@ def _parse_bool(text: str, column: str) -> float:
 
 
 def _variants(frame: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
+    """Per row: the variant key and display name; a method recorded at more than one guidance setting
+    (rho, s) or with more than one predictor checkpoint (its digest) gets one variant per combination."""
     variant = frame["method"].copy()
     name = frame["method"].map(method_display)
+    predictor = frame["checkpoint_predictor"].astype(str) if "checkpoint_predictor" in frame.columns else pd.Series("", index=frame.index)
     for method, rows in frame.groupby("method", sort=False):
         settings = rows[["rho", "s"]].drop_duplicates()
-        if len(settings) <= 1:
+        predictors = predictor[rows.index]
+        if len(settings) <= 1 and predictors.nunique() <= 1:
             continue
         digits = _label_digits(settings)
         for index, row in rows.iterrows():
-            label = _setting_label(row["rho"], row["s"], digits)
+            parts = [_setting_label(row["rho"], row["s"], digits)] if len(settings) > 1 else []
+            if predictors.nunique() > 1:
+                parts.append(f"predictor {predictors[index][:8]}")
+            label = ", ".join(parts)
             variant.at[index] = f"{method}[{label}]"
             name.at[index] = f"{method_display(method)} ({label})"
     return variant, name

@@ -217,6 +217,25 @@ def test_runs_given_together_report_a_method_once_per_guidance_setting(tmp_path,
     assert "one run directory" in capsys.readouterr().err
 
 
+def test_runs_guided_by_different_predictors_report_one_variant_per_predictor(tmp_path):
+    old, new, out = tmp_path / "old", tmp_path / "new", tmp_path / "out"
+    for folder, digest, outcomes in ((old, "e541c70af52bc554", ["spill"] * 3 + ["success"]), (new, "43d4a5a96cef9c8d", ["success"] * 3 + ["spill"])):
+        folder.mkdir()
+        rows = [{**episode("grits", "sago", "low", t, o, run_id="evaluate"), "checkpoint_predictor": digest} for t, o in enumerate(outcomes)]
+        if folder == old:
+            rows += [{**episode("dp", "sago", "low", t, "success", run_id="evaluate"), "checkpoint_predictor": None} for t in range(4)]
+        pd.DataFrame(rows).to_parquet(folder / "episodes.parquet", index=False)
+    assert main(["report", str(old), str(new), "--output-dir", str(out)]) == 0
+    fig5 = pd.read_csv(out / "csv" / "fig5_overall.csv").set_index("variant")
+    assert fig5.loc["grits[predictor e541c70a]", "spillage_k"] == 3
+    assert fig5.loc["grits[predictor 43d4a5a9]", "spillage_k"] == 1
+    assert fig5.loc["dp", "episodes"] == 4
+    # the same predictor in both runs is the same episode twice: refused as before
+    pd.DataFrame([{**episode("grits", "sago", "low", 0, "success", run_id="evaluate"), "checkpoint_predictor": "43d4a5a96cef9c8d"}]
+                 ).to_parquet(old / "episodes.parquet", index=False)
+    assert main(["report", str(old), str(new), "--output-dir", str(tmp_path / "out2")]) == 2
+
+
 def test_runs_that_cannot_be_reported_together_are_refused_in_one_line(tmp_path, capsys):
     first, second, sweep = tmp_path / "first", tmp_path / "second", tmp_path / "sweep"
     for folder in (first, second, sweep):
