@@ -247,8 +247,22 @@ def _read_records(files: list[Path], data: RunData) -> list[pd.DataFrame]:
             data.ignored_files.append(f"{path.name} (not episode records: lacks {', '.join(missing)})")
             continue
         data.episode_files.append(path)
-        frames.append(frame)
+        frames.append(_with_guiding_predictor(frame))
     return frames
+
+
+def _with_guiding_predictor(frame: pd.DataFrame) -> pd.DataFrame:
+    """`checkpoint_predictor` set to the digest of whichever predictor guided each episode.
+
+    Records keep one digest column per checkpoint key (`checkpoint_predictor`,
+    `checkpoint_predictor_raw`, `checkpoint_predictor_pointnet2`); a method uses one of them.
+    """
+    columns = sorted(c for c in frame.columns if c.startswith("checkpoint_predictor"))
+    if not columns:
+        return frame
+    frame = frame.copy()
+    frame["checkpoint_predictor"] = frame[columns].bfill(axis=1).iloc[:, 0]
+    return frame
 
 
 def _deduplicate(frame: pd.DataFrame) -> tuple[pd.DataFrame, int]:

@@ -222,6 +222,9 @@ def test_runs_guided_by_different_predictors_report_one_variant_per_predictor(tm
     for folder, digest, outcomes in ((old, "e541c70af52bc554", ["spill"] * 3 + ["success"]), (new, "43d4a5a96cef9c8d", ["success"] * 3 + ["spill"])):
         folder.mkdir()
         rows = [{**episode("grits", "sago", "low", t, o, run_id="evaluate"), "checkpoint_predictor": digest} for t, o in enumerate(outcomes)]
+        # the raw-cloud ablation records its predictor under its own checkpoint key
+        rows += [{**episode("grits_raw", "sago", "low", t, o, run_id="evaluate"), "checkpoint_predictor_raw": digest[::-1]}
+                 for t, o in enumerate(outcomes)]
         if folder == old:
             rows += [{**episode("dp", "sago", "low", t, "success", run_id="evaluate"), "checkpoint_predictor": None} for t in range(4)]
         pd.DataFrame(rows).to_parquet(folder / "episodes.parquet", index=False)
@@ -230,6 +233,8 @@ def test_runs_guided_by_different_predictors_report_one_variant_per_predictor(tm
     assert fig5.loc["grits[predictor e541c70a]", "spillage_k"] == 3
     assert fig5.loc["grits[predictor 43d4a5a9]", "spillage_k"] == 1
     assert fig5.loc["dp", "episodes"] == 4
+    fig8 = pd.read_csv(out / "csv" / "fig8_ablation.csv").set_index("variant")
+    assert fig8.loc[f"grits_raw[predictor {'e541c70af52bc554'[::-1][:8]}]", "spillage_k"] == 3
     # the same predictor in both runs is the same episode twice: refused as before
     pd.DataFrame([{**episode("grits", "sago", "low", 0, "success", run_id="evaluate"), "checkpoint_predictor": "43d4a5a96cef9c8d"}]
                  ).to_parquet(old / "episodes.parquet", index=False)
