@@ -48,11 +48,10 @@ def main() -> None:
             wall = time.perf_counter() - started
             out["runs"][f"{n}x{threads}"] = {"steps_per_s": round(summary["steps"] / summary["seconds"], 2), "wall_s": round(wall, 1),
                               "final_train_loss": round(summary["final_train_loss"], 4)}
-    one = next(iter(out["runs"].values()))
-    if one:
-        for run in out["runs"].values():
-            run["speedup"] = round(run["steps_per_s"] / one["steps_per_s"], 2)
-            run["wall_speedup"] = round(one["wall_s"] / run["wall_s"], 2)
+    first = next(iter(out["runs"].values()))
+    for run in out["runs"].values():
+        run["speedup"] = round(run["steps_per_s"] / first["steps_per_s"], 2)
+        run["wall_speedup"] = round(first["wall_s"] / run["wall_s"], 2)
     print(json.dumps(out, indent=2))
 
 

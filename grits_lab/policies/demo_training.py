@@ -191,7 +191,7 @@ def _train(
         if ema is not None:
             ema.load_state_dict(ckpt["ema"])
         step = int(ckpt["step"])
-        states = ckpt.get("torch_rng_processes") or [ckpt["torch_rng"]]
+        states = ckpt.get("torch_rng_processes") or [ckpt["torch_rng"]]  # checkpoints written before data-parallel training
         if len(states) == world_size:
             gen.set_state(states[rank])
         else:  # another process count: fresh noise streams, determined by (seed, rank, step)
@@ -210,9 +210,7 @@ def _train(
             "optimizer": optimizer.state_dict(),
             "lr_scheduler": scheduler.state_dict(),
             "step": step,
-            "torch_rng": rng_states[0],
-            "torch_rng_processes": rng_states,
-            "num_processes": world_size,
+            "torch_rng_processes": rng_states,  # one noise generator state per process
             "train_config": config_to_dict(config),
             "config_fingerprint": config_fingerprint(policy_config),
             "dataset_fingerprint": fingerprint,

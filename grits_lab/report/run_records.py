@@ -176,12 +176,13 @@ def _variants(frame: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
     for method, rows in frame.groupby("method", sort=False):
         settings = rows[["rho", "s"]].drop_duplicates()
         predictors = predictor[rows.index]
-        if len(settings) <= 1 and predictors.nunique() <= 1:
+        by_setting, by_predictor = len(settings) > 1, predictors.nunique() > 1
+        if not (by_setting or by_predictor):
             continue
         digits = _label_digits(settings)
         for index, row in rows.iterrows():
-            parts = [_setting_label(row["rho"], row["s"], digits)] if len(settings) > 1 else []
-            if predictors.nunique() > 1:
+            parts = [_setting_label(row["rho"], row["s"], digits)] if by_setting else []
+            if by_predictor:
                 parts.append(f"predictor {predictors[index][:8]}")
             label = ", ".join(parts)
             variant.at[index] = f"{method}[{label}]"

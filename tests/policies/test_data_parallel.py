@@ -96,3 +96,17 @@ def test_an_error_inside_a_process_reaches_the_caller_with_its_type(tmp_path):
 
 def test_config_keeps_one_process_by_default(demo_dataset, tmp_path):
     assert config_from_dict(PolicyTrainConfig, {"dataset": "d", "output_dir": "o"}).num_processes == 1
+
+
+def test_a_checkpoint_from_before_data_parallel_training_resumes_exactly(demo_dataset, tmp_path):
+    straight = train_policy(_train_config(demo_dataset, tmp_path / "a"), progress=False)
+    train_policy(_train_config(demo_dataset, tmp_path / "b"), max_steps=10, progress=False)
+    last = tmp_path / "b" / "checkpoints" / "last.pt"
+    old = torch.load(last, weights_only=False)
+    old["torch_rng"] = old.pop("torch_rng_processes")[0]  # the single generator state older checkpoints kept
+    torch.save(old, last)
+    resumed = train_policy(_train_config(demo_dataset, tmp_path / "b"), progress=False)
+    sa = torch.load(straight["checkpoint"], weights_only=False)
+    sb = torch.load(resumed["checkpoint"], weights_only=False)
+    for key, value in sa["policy"]["model"].items():
+        torch.testing.assert_close(sb["policy"]["model"][key], value, rtol=1e-5, atol=1e-6)
