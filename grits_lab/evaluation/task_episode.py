@@ -189,7 +189,13 @@ def summarize_guidance(diagnostics: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings) -> dict[str, Any]:
-    """Stages 2 and 3: locate the target, carry the spoon level, pour, settle; returns the measurements."""
+    """Stages 2 and 3: locate the target, carry the spoon level, pour, settle; returns the measurements.
+
+    Besides the metrics: "ik_failures" (actions of the transfer and pour whose pose the arm could
+    not reach) and "max_joint_step_rad" (the largest change of a commanded joint angle in one
+    action; above the Panda's 0.22-0.26 rad per action the arm has flipped posture, which throws
+    the load).
+    """
     target = locate_bowl(scene.object_points("target_bowl"))
     truth = np.asarray(env.target_bowl_pose(), dtype=np.float64)[:3, 3]
     world = env.world
@@ -205,18 +211,26 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     # The robot's base stands at the world origin (grits_lab/sim/world.py): radial = away from it.
     heading = math.atan2(target.centre[1], target.centre[0]) if settings.heading == "radial" else None
     path = plan_transfer(current, target, obstacles, settings.clearance, settings.pour_height, max_step, reach, settings.level_steps, heading)
-    for action in path:
-        env.step(action)
+    ik_failures, joint_steps = 0, [0.0]
+
+    def step(action: np.ndarray) -> None:
+        nonlocal ik_failures
+        info = env.step(action)[4]
+        ik_failures += int(info["ik_failure"])
+        joint_steps.append(float(info["joint_step"]))
         scene.advance()
+
+    for action in path:
+        step(action)
     spilled_after_transfer = int(env.metrics()["spilled"])
     pour = pour_motion(path[-1], settings.pour_angle_deg, settings.pour_steps)
     for action in pour:
-        env.step(action)
-        scene.advance()
+        step(action)
     for _ in range(settings.settle_steps):
-        env.step(pour[-1])
-        scene.advance()
+        step(pour[-1])
     return {
+        "ik_failures": ik_failures,
+        "max_joint_step_rad": max(joint_steps),
         "metrics": env.metrics(),
         "spilled_after_transfer": spilled_after_transfer,
         "target_locate_error_m": float(np.linalg.norm(target.centre[:2] - truth[:2])),
@@ -268,7 +282,8 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         **summarize_guidance(scoop["diagnostics"]),
     }
     transferred, spilled_total, transfer_time, final = 0, int(m["spilled"]), 0.0, m
-    record.update({"target_locate_error_m": math.nan, "target_fit_residual_m": math.nan, "spilled_transfer": 0})
+    record.update({"target_locate_error_m": math.nan, "target_fit_residual_m": math.nan, "spilled_transfer": 0,
+                   "transfer_ik_failures": 0, "transfer_max_joint_step_rad": math.nan})
     if config.transfer.enabled and m["scooped"] > 0:
         t0 = time.perf_counter()
         tr = run_transfer(env, scene, config.transfer)
@@ -277,7 +292,8 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         transferred = int(tr["metrics"]["transferred"])
         spilled_total = int(tr["metrics"]["spilled"])
         record.update({"target_locate_error_m": tr["target_locate_error_m"], "target_fit_residual_m": tr["target_fit_residual_m"],
-                       "spilled_transfer": max(0, spilled_total - int(m["spilled"]))})
+                       "spilled_transfer": max(0, spilled_total - int(m["spilled"])),
+                       "transfer_ik_failures": tr["ik_failures"], "transfer_max_joint_step_rad": tr["max_joint_step_rad"]})
     needed = 1 if env.food.success_rule == "items" else max(1, math.ceil(0.5 * int(m["scooped"])))
     record.update({
         "transferred": transferred,

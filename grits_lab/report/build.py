@@ -44,6 +44,7 @@ from grits_lab.report.tables import (
     breakdown_long,
     breakdown_tables,
     claims_table,
+    failure_table,
     method_table,
     per_food_table,
     setting_table,
@@ -136,6 +137,7 @@ def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Sec
             items.append(_figure("fig6_per_food", fig6.title, fig6.caption,
                                  figures.per_food_stacks(fig6.data, out / "figures" / "fig6_per_food.png", fig6.title), result))
         sections.append(Section("Fig. 6: per food", items))
+        sections.append(Section("Why tasks failed", [_table(failure_table(episodes), out, result)]))
         sections.append(Section("Fig. 8: predictor ablation", [
             _table(fig8, out, result),
             _figure("fig8_ablation", fig8.title, "Bars: simulation; error bars: Wilson 95%.",

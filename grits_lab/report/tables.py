@@ -325,3 +325,91 @@ def setting_table(episodes: pd.DataFrame) -> ReportTable:
         pd.DataFrame(display_rows), pd.DataFrame(data_rows),
         ["Neighbouring settings whose intervals overlap are not distinguishable with these episode counts."],
     )
+
+
+# Why a task failed, by the stage that ended it (grits_lab/evaluation/task_episode.py): each
+# episode falls in exactly one of these, in this order.
+FAILURE_STAGES = (
+    ("task_success", "Task success"),
+    ("error", "Error"),
+    ("scoop_spill", "Spill during the scoop"),
+    ("scoop_failure", "Scoop failure (no spill)"),
+    ("transfer_spill", "Spill in the transfer or pour"),
+    ("not_delivered", "Load not delivered (no spill)"),
+)
+
+
+def failure_stages(rows: pd.DataFrame) -> dict[str, pd.Series]:
+    """Boolean masks over `rows` (normalized records), one per FAILURE_STAGES key; they partition the rows.
+
+    "transfer_spill" and "not_delivered" need the `spilled` and `spilled_total` columns (records
+    of `grits-lab evaluate`); without them both are all-NaN masks, and only their union (the
+    episodes that failed after a clean scoop) is known.
+    """
+    ok = ~rows["is_error"]
+    scoop_spill = ok & rows["spillage"]
+    scoop_failure = ok & ~rows["spillage"] & rows["scoop_failure"]
+    after_scoop = ok & ~rows["spillage"] & ~rows["scoop_failure"] & ~rows["task_success"]
+    masks = {"task_success": rows["task_success"] & ok, "error": rows["is_error"], "scoop_spill": scoop_spill,
+             "scoop_failure": scoop_failure}
+    if {"spilled", "spilled_total"} <= set(rows.columns) and rows.loc[after_scoop, ["spilled", "spilled_total"]].notna().all().all():
+        lost = pd.to_numeric(rows["spilled_total"], errors="coerce") > pd.to_numeric(rows["spilled"], errors="coerce")
+        masks["transfer_spill"] = after_scoop & lost
+        masks["not_delivered"] = after_scoop & ~lost
+    else:
+        masks["transfer_spill"] = masks["not_delivered"] = pd.Series(math.nan, index=rows.index)
+    return masks
+
+
+def failure_table(episodes: pd.DataFrame | None) -> ReportTable:
+    """Method x the stage that ended each episode (FAILURE_STAGES): counts of k / episodes.
+
+    Also counts the transfers in which the arm met a pose it could not reach
+    (`transfer_ik_failures` > 0), where the records hold that column.
+    """
+    display_rows, data_rows = [], []
+    merged = False
+    for variant, name in all_variants(episodes) if episodes is not None and not episodes.empty else []:
+        rows = episodes[episodes["variant"] == variant]
+        n = len(rows)
+        masks = failure_stages(rows)
+        shown: dict[str, str] = {"Method": name, "Episodes": str(n)}
+        data: dict[str, object] = {"method": rows["method"].iloc[0], "variant": variant, "method_name": name, "episodes": n}
+        for key, label in FAILURE_STAGES:
+            mask = masks[key]
+            if mask.isna().all():
+                merged = True
+                shown[label] = MISSING
+                data[f"{key}_k"] = math.nan
+                if key == "not_delivered":
+                    k = n - sum(int(masks[other].sum()) for other in ("task_success", "error", "scoop_spill", "scoop_failure"))
+                    shown[label] = f"{k}/{n} (with the spills)"
+                    data["after_scoop_k"] = k
+            else:
+                k = int(mask.astype(bool).sum())
+                shown[label] = f"{k}/{n}"
+                data[f"{key}_k"] = k
+        ik = pd.to_numeric(rows["transfer_ik_failures"], errors="coerce") if "transfer_ik_failures" in rows.columns else None
+        transfers = pd.to_numeric(rows["transfer_max_joint_step_rad"], errors="coerce").notna() if "transfer_max_joint_step_rad" in rows.columns else None
+        if ik is not None and transfers is not None and transfers.any():
+            k = int(((ik > 0) & transfers).sum())
+            shown["Transfers reaching an unreachable pose"] = f"{k}/{int(transfers.sum())}"
+            data.update({"transfer_unreachable_k": k, "transfers": int(transfers.sum())})
+        else:
+            shown["Transfers reaching an unreachable pose"] = MISSING
+            data.update({"transfer_unreachable_k": math.nan, "transfers": math.nan})
+        display_rows.append(shown)
+        data_rows.append(data)
+    notes = [
+        "Each episode is counted once, at the first stage that ended it: an error, a spill during the scoop, a scoop "
+        "that carried too little, a spill in the transfer or pour, or a load that reached no target bowl without "
+        "spilling (it stayed on the spoon or fell back into the source bowl).",
+        "Transfers reaching an unreachable pose: transfers (and pours) with at least one action whose pose the arm "
+        "could not reach (`transfer_ik_failures`); the IK then flips the arm to another posture, which throws the load.",
+    ]
+    if merged:
+        notes.insert(0, "(with the spills): these records lack `spilled_total`, so the failures after a clean scoop "
+                        "are counted together, under 'Load not delivered'.")
+    return ReportTable("failure_stages", "Why tasks failed: the stage that ended each episode",
+                       "Per method, episodes by the first stage that ended them.",
+                       pd.DataFrame(display_rows), pd.DataFrame(data_rows), notes)

@@ -185,6 +185,7 @@ class ScoopEnv:
             world.freeze(self._far_at_rest(world, start[:3, 3], target[:3, 3], cfg.freeze_distance))
         pieces = cfg.ik_per_action
         steps = cfg.substeps
+        joints_before = self._joint_target.copy()
         failed = False
         done = 0
         for k in range(pieces):
@@ -201,10 +202,11 @@ class ScoopEnv:
         self._pose_target = target
         self.step_count += 1
         self.ik_failures += int(failed)
+        joint_step = float(np.abs(self._joint_target - joints_before).max())
         before = self.tracker.history[-1] if self.tracker.history else 0
         spilled = self.tracker.update(self._classify(), self._spoon_outside_source())
         truncated = self.step_count >= cfg.max_episode_steps
-        return self._obs(), -float(spilled - before), False, truncated, self._info(ik_failure=failed)
+        return self._obs(), -float(spilled - before), False, truncated, self._info(ik_failure=failed, joint_step=joint_step)
 
     @staticmethod
     def _far_at_rest(world: World, a: np.ndarray, b: np.ndarray, distance: float) -> np.ndarray:
@@ -320,9 +322,12 @@ class ScoopEnv:
         return {"ee_pose": matrix_to_pose9(w.spoon_matrix()).astype(np.float32),
                 "joint_pos": w.joint_positions().astype(np.float32)}
 
-    def _info(self, ik_failure: bool) -> dict[str, Any]:
+    def _info(self, ik_failure: bool, joint_step: float = 0.0) -> dict[str, Any]:
+        # joint_step: the largest change of any arm joint's commanded angle over the action (rad).
+        # The Panda moves at most 2.175-2.61 rad/s, 0.22-0.26 rad per 0.1 s action; far larger
+        # steps are the IK leaving for another arm posture (an elbow or wrist flip).
         return {"step": self.step_count, "spilled": self.tracker.history[-1] if self.tracker.history else 0,
-                "ik_failure": ik_failure, "ik_failures": self.ik_failures}
+                "ik_failure": ik_failure, "ik_failures": self.ik_failures, "joint_step": joint_step}
 
     def _require_world(self) -> World:
         if self.world is None:

@@ -14,7 +14,7 @@ from grits_lab.cli import main
 from grits_lab.errors import InputError
 from grits_lab.report import build_report, load_run, normalize_records, wilson_interval
 from grits_lab.report.sweep import summarize_sweep
-from grits_lab.report.tables import claims_table, method_table, per_food_table
+from grits_lab.report.tables import claims_table, failure_table, method_table, per_food_table
 from grits_lab.report.vocabulary import MAIN_METHODS, MISSING
 from tests.report.synthetic_records import episode, plausible_run
 
@@ -112,6 +112,38 @@ def test_claims_compare_spillage_reduction_with_the_paper(records):
     assert reduction["simulation"] == pytest.approx(1 - (1 / 14) / (3 / 10))
     assert reduction["note"] == "holds"
     assert claims.loc["Diffusion Policy (Post.): spillage", "note"] == "no simulated episodes"
+
+
+def test_failure_table_counts_each_episode_once_at_the_stage_that_ended_it():
+    # One DP episode per stage, in the task's order, with the particle counts the simulation records.
+    rows = [
+        episode("dp", "sago", "low", 0, "success"),
+        episode("dp", "sago", "low", 1, "success", error="worker lost"),
+        episode("dp", "sago", "low", 2, "spill"),
+        episode("dp", "sago", "low", 3, "spill_and_scoop_fail"),  # spilled during the scoop: counted there
+        episode("dp", "sago", "low", 4, "scoop_fail"),
+        episode("dp", "sago", "high", 0, "transfer_fail"),  # clean scoop, 3 grains lost on the way
+        episode("dp", "sago", "high", 1, "transfer_fail"),  # clean scoop, nothing spilled, nothing delivered
+    ]
+    frame = pd.DataFrame(rows)
+    frame["spilled_total"] = frame["spilled"]
+    frame.loc[5, "spilled_total"] = 3
+    frame["transfer_ik_failures"] = [0, 0, 0, 0, 0, 0, 9]
+    frame["transfer_max_joint_step_rad"] = [0.2, 0.2, 0.2, math.nan, math.nan, 0.2, 1.4]  # no transfer after a failed scoop
+    data = failure_table(normalize_records(frame)).data.iloc[0]
+    assert data["episodes"] == 7
+    assert {k: data[f"{k}_k"] for k in ("task_success", "error", "scoop_spill", "scoop_failure", "transfer_spill", "not_delivered")} == {
+        "task_success": 1, "error": 1, "scoop_spill": 2, "scoop_failure": 1, "transfer_spill": 1, "not_delivered": 1}
+    assert (data["transfer_unreachable_k"], data["transfers"]) == (1, 5)
+
+
+def test_failure_table_without_particle_totals_counts_the_failures_after_the_scoop_together(records):
+    table = failure_table(records)
+    assert (table.data["episodes"] == table.data[["task_success_k", "error_k", "scoop_spill_k", "scoop_failure_k",
+                                                  "after_scoop_k"]].sum(axis=1)).all()
+    assert table.data["transfer_spill_k"].isna().all()
+    assert table.display["Transfers reaching an unreachable pose"].eq(MISSING).all()
+    assert "lack `spilled_total`" in table.notes[0]
 
 
 def test_flag_missing_outside_an_errored_episode_is_rejected():

@@ -197,6 +197,16 @@ def test_unreachable_poses_are_counted_not_fatal(env):
     assert env.metrics()["ik_failures"] == 1
 
 
+def test_joint_step_is_the_largest_commanded_joint_change_of_the_action(env):
+    obs, _ = env.reset(seed=0, options={"food": "orange"})
+    hold = obs["ee_pose"].astype(np.float64)
+    assert env.step(hold)[4]["joint_step"] < 0.01  # holding the measured pose asks (almost) nothing of the arm
+    near = hold.copy()
+    near[2] += 0.01  # 1 cm up in one 0.1 s action: well within the Panda's joint speeds
+    step = env.step(near)[4]["joint_step"]
+    assert 1e-4 < step < 0.22
+
+
 def test_bad_actions_and_options_are_input_errors(env):
     env.reset(seed=0, options={"food": "orange"})
     with pytest.raises(InputError):
