@@ -28,7 +28,8 @@ NOT_COMPARED = frozenset({"wall_time_s", "scoop_time_s", "transfer_time_s", "pla
 
 @dataclass
 class ReplayResult:
-    """What a replay found. `mismatches`: column -> (recorded, replayed) for every metric that differs."""
+    """What a replay found. `mismatches`: column -> (recorded, replayed) for every metric that differs;
+    `unrecorded`: metrics the replay measured that the record lacks (columns added since the run), with their values."""
 
     method: str
     food: str
@@ -43,6 +44,7 @@ class ReplayResult:
     frames: int = 0
     replayed: dict[str, Any] = field(default_factory=dict)
     plan_figure: str | None = None
+    unrecorded: dict[str, Any] = field(default_factory=dict)
 
     @property
     def matches(self) -> bool:
@@ -54,15 +56,18 @@ class ReplayResult:
             "rho": None if math.isnan(self.rho) else self.rho, "s": self.s, "matches": self.matches,
             "compared": self.compared, "mismatches": {k: [_plain(a), _plain(b)] for k, (a, b) in self.mismatches.items()},
             "video": self.video, "frames": self.frames, "plan_figure": self.plan_figure,
+            "unrecorded": {k: _plain(v) for k, v in self.unrecorded.items()},
         }
 
     def describe(self) -> str:
         """One line: the replay reproduced the record, or which metrics diverged and from which step."""
         head = f"{self.method} {self.food}/{self.level} trial {self.trial} (seed {self.seed})"
+        tail = ("; measured, not in the record: " + ", ".join(f"{k} {_plain(v)}" for k, v in self.unrecorded.items())
+                if self.unrecorded else "")
         if self.matches:
-            return f"{head}: replay reproduces the record ({len(self.compared)} metrics equal)"
+            return f"{head}: replay reproduces the record ({len(self.compared)} metrics equal){tail}"
         diffs = ", ".join(f"{k} {_plain(a)} -> {_plain(b)}" for k, (a, b) in self.mismatches.items())
-        return f"{head}: replay DIVERGED from the record{self.divergence_step()}: {diffs}"
+        return f"{head}: replay DIVERGED from the record{self.divergence_step()}: {diffs}{tail}"
 
     def divergence_step(self) -> str:
         steps = []
@@ -238,7 +243,9 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
         env.close()
     compared = sorted(k for k in replayed if k in record and k not in NOT_COMPARED)
     mismatches = {k: (record[k], replayed[k]) for k in compared if not _equal(record[k], replayed[k])}
-    result = ReplayResult(method, food, str(level), int(trial), int(record["seed"]), rho, s, compared, mismatches, replayed=replayed)
+    unrecorded = {k: v for k, v in replayed.items() if k not in record and not k.startswith("_") and k not in NOT_COMPARED}
+    result = ReplayResult(method, food, str(level), int(trial), int(record["seed"]), rho, s, compared, mismatches,
+                          replayed=replayed, unrecorded=unrecorded)
     if video is not None:
         result.video = str(write_video(video, played.frames, fps=config.sim.control_hz / played._every))
         result.frames = len(played.frames)

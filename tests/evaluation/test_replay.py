@@ -74,6 +74,18 @@ def test_a_record_that_disagrees_with_its_episode_is_reported_with_the_column(ru
     assert "DIVERGED" in result.describe() and "scooped" in result.describe()
 
 
+def test_metrics_a_record_predates_are_measured_and_named_not_compared(run, tmp_path):
+    run_dir, records = run
+    older = run_copy(run_dir, tmp_path / "older", records.drop(columns=["transfer_ik_failures", "transfer_max_joint_step_rad"]))
+    result = replay_episode(older, **episode(records, "dp"))
+    assert result.matches, result.describe()
+    row = records[records["method"] == "dp"].iloc[0]
+    assert result.unrecorded == {"transfer_ik_failures": row["transfer_ik_failures"],
+                                 "transfer_max_joint_step_rad": pytest.approx(row["transfer_max_joint_step_rad"], nan_ok=True)}
+    assert "not in the record: transfer_ik_failures" in result.describe()
+    assert "transfer_ik_failures" not in result.compared
+
+
 def test_a_checkpoint_that_changed_since_the_record_stops_the_replay(run, tmp_path):
     run_dir, records = run
     frame = records.copy()
