@@ -193,8 +193,8 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
 
     Besides the metrics: "ik_failures" (actions of the transfer and pour whose pose the arm could
     not reach) and "max_joint_step_rad" (the largest change of a commanded joint angle in one
-    action; above the Panda's 0.22-0.26 rad per action the arm has flipped posture, which throws
-    the load).
+    action, rad; the Panda moves at most 0.22-0.26 rad per 0.1 s action, and the flips to another
+    arm posture that throw a load measured 0.6-1.7 rad).
     """
     target = locate_bowl(scene.object_points("target_bowl"))
     truth = np.asarray(env.target_bowl_pose(), dtype=np.float64)[:3, 3]

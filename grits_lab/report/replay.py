@@ -241,9 +241,12 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
         replayed = run_task_episode(played, controller, config, seed=seed, food=food, level=level, builder=builder)
     finally:
         env.close()
-    compared = sorted(k for k in replayed if k in record and k not in NOT_COMPARED)
+    # A column the record lacks, or holds empty while the replay measured it (a run resumed across
+    # the commit that added the column), is reported, not compared.
+    unrecorded = {k: v for k, v in replayed.items() if not k.startswith("_") and k not in NOT_COMPARED
+                  and (k not in record or (_plain(record[k]) is None and _plain(v) is not None))}
+    compared = sorted(k for k in replayed if k in record and k not in NOT_COMPARED and k not in unrecorded)
     mismatches = {k: (record[k], replayed[k]) for k in compared if not _equal(record[k], replayed[k])}
-    unrecorded = {k: v for k, v in replayed.items() if k not in record and not k.startswith("_") and k not in NOT_COMPARED}
     result = ReplayResult(method, food, str(level), int(trial), int(record["seed"]), rho, s, compared, mismatches,
                           replayed=replayed, unrecorded=unrecorded)
     if video is not None:

@@ -335,27 +335,31 @@ FAILURE_STAGES = (
     ("scoop_spill", "Spill during the scoop"),
     ("scoop_failure", "Scoop failure (no spill)"),
     ("transfer_spill", "Spill in the transfer or pour"),
-    ("not_delivered", "Load not delivered (no spill)"),
+    ("not_delivered", "Too little delivered (no spill)"),
 )
 
 
 def failure_stages(rows: pd.DataFrame) -> dict[str, pd.Series]:
-    """Boolean masks over `rows` (normalized records), one per FAILURE_STAGES key; they partition the rows.
+    """Boolean masks over `rows` (normalized records), one per FAILURE_STAGES key.
 
-    "transfer_spill" and "not_delivered" need the `spilled` and `spilled_total` columns (records
-    of `grits-lab evaluate`); without them both are all-NaN masks, and only their union (the
-    episodes that failed after a clean scoop) is known.
+    Built in the task's order, each from what the earlier ones left, so they partition the rows
+    whatever the record source: an error, then a spill during the scoop, then a scoop failure,
+    then success, and what is left failed after a clean scoop. That is split by `spilled_transfer`
+    (particles spilled in the transfer and pour, recorded by `grits-lab evaluate`) into
+    "transfer_spill" and "not_delivered"; without that column both are all-NaN masks and only
+    their union is known (`1 -` the other masks).
     """
     ok = ~rows["is_error"]
     scoop_spill = ok & rows["spillage"]
-    scoop_failure = ok & ~rows["spillage"] & rows["scoop_failure"]
-    after_scoop = ok & ~rows["spillage"] & ~rows["scoop_failure"] & ~rows["task_success"]
-    masks = {"task_success": rows["task_success"] & ok, "error": rows["is_error"], "scoop_spill": scoop_spill,
+    scoop_failure = ok & ~scoop_spill & rows["scoop_failure"]
+    clean_scoop = ok & ~scoop_spill & ~scoop_failure
+    after_scoop = clean_scoop & ~rows["task_success"]
+    masks = {"task_success": clean_scoop & rows["task_success"], "error": rows["is_error"], "scoop_spill": scoop_spill,
              "scoop_failure": scoop_failure}
-    if {"spilled", "spilled_total"} <= set(rows.columns) and rows.loc[after_scoop, ["spilled", "spilled_total"]].notna().all().all():
-        lost = pd.to_numeric(rows["spilled_total"], errors="coerce") > pd.to_numeric(rows["spilled"], errors="coerce")
-        masks["transfer_spill"] = after_scoop & lost
-        masks["not_delivered"] = after_scoop & ~lost
+    transfer_spilled = pd.to_numeric(rows.get("spilled_transfer", pd.Series(math.nan, index=rows.index)), errors="coerce")
+    if "spilled_transfer" in rows.columns and transfer_spilled[after_scoop].notna().all():
+        masks["transfer_spill"] = after_scoop & (transfer_spilled > 0)
+        masks["not_delivered"] = after_scoop & ~(transfer_spilled > 0)
     else:
         masks["transfer_spill"] = masks["not_delivered"] = pd.Series(math.nan, index=rows.index)
     return masks
@@ -390,26 +394,29 @@ def failure_table(episodes: pd.DataFrame | None) -> ReportTable:
                 shown[label] = f"{k}/{n}"
                 data[f"{key}_k"] = k
         ik = pd.to_numeric(rows["transfer_ik_failures"], errors="coerce") if "transfer_ik_failures" in rows.columns else None
-        transfers = pd.to_numeric(rows["transfer_max_joint_step_rad"], errors="coerce").notna() if "transfer_max_joint_step_rad" in rows.columns else None
+        transfers = (pd.to_numeric(rows["transfer_max_joint_step_rad"], errors="coerce").notna() & ~rows["is_error"]
+                     if "transfer_max_joint_step_rad" in rows.columns else None)
         if ik is not None and transfers is not None and transfers.any():
             k = int(((ik > 0) & transfers).sum())
-            shown["Transfers reaching an unreachable pose"] = f"{k}/{int(transfers.sum())}"
+            shown["Transfers with an unreachable pose"] = f"{k}/{int(transfers.sum())}"
             data.update({"transfer_unreachable_k": k, "transfers": int(transfers.sum())})
         else:
-            shown["Transfers reaching an unreachable pose"] = MISSING
+            shown["Transfers with an unreachable pose"] = MISSING
             data.update({"transfer_unreachable_k": math.nan, "transfers": math.nan})
         display_rows.append(shown)
         data_rows.append(data)
     notes = [
         "Each episode is counted once, at the first stage that ended it: an error, a spill during the scoop, a scoop "
-        "that carried too little, a spill in the transfer or pour, or a load that reached no target bowl without "
-        "spilling (it stayed on the spoon or fell back into the source bowl).",
-        "Transfers reaching an unreachable pose: transfers (and pours) with at least one action whose pose the arm "
-        "could not reach (`transfer_ik_failures`); the IK then flips the arm to another posture, which throws the load.",
+        "that carried too little, a spill in the transfer or pour, or, without any spill, less food in the target "
+        "bowl than the task asks (one item, or half the scooped particles): the rest stayed on the spoon or fell "
+        "back into the source bowl.",
+        "Transfers with an unreachable pose: transfers (and pours) of episodes without an error with at least one "
+        "action whose pose the arm could not reach (`transfer_ik_failures`); the IK may then find the pose in "
+        "another arm posture, and the flip throws the load.",
     ]
     if merged:
-        notes.insert(0, "(with the spills): these records lack `spilled_total`, so the failures after a clean scoop "
-                        "are counted together, under 'Load not delivered'.")
+        notes.insert(0, "(with the spills): these records lack `spilled_transfer`, so the failures after a clean "
+                        "scoop are counted together, under 'Too little delivered'.")
     return ReportTable("failure_stages", "Why tasks failed: the stage that ended each episode",
                        "Per method, episodes by the first stage that ended them.",
                        pd.DataFrame(display_rows), pd.DataFrame(data_rows), notes)

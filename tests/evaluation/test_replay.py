@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import re
 
 import imageio.v2 as imageio
@@ -84,6 +85,13 @@ def test_metrics_a_record_predates_are_measured_and_named_not_compared(run, tmp_
                                  "transfer_max_joint_step_rad": pytest.approx(row["transfer_max_joint_step_rad"], nan_ok=True)}
     assert "not in the record: transfer_ik_failures" in result.describe()
     assert "transfer_ik_failures" not in result.compared
+    # A run resumed across the commit that added them holds the columns, empty in its older rows.
+    resumed = records.copy()
+    resumed["transfer_ik_failures"] = resumed["transfer_ik_failures"].astype(float)
+    resumed.loc[resumed["method"] == "dp", "transfer_ik_failures"] = math.nan
+    result = replay_episode(run_copy(run_dir, tmp_path / "resumed", resumed), **episode(records, "dp"))
+    assert result.matches, result.describe()
+    assert result.unrecorded == {"transfer_ik_failures": row["transfer_ik_failures"]}
 
 
 def test_a_checkpoint_that_changed_since_the_record_stops_the_replay(run, tmp_path):

@@ -14,7 +14,7 @@ from grits_lab.cli import main
 from grits_lab.errors import InputError
 from grits_lab.report import build_report, load_run, normalize_records, wilson_interval
 from grits_lab.report.sweep import summarize_sweep
-from grits_lab.report.tables import claims_table, failure_table, method_table, per_food_table
+from grits_lab.report.tables import claims_table, failure_stages, failure_table, method_table, per_food_table
 from grits_lab.report.vocabulary import MAIN_METHODS, MISSING
 from tests.report.synthetic_records import episode, plausible_run
 
@@ -126,15 +126,26 @@ def test_failure_table_counts_each_episode_once_at_the_stage_that_ended_it():
         episode("dp", "sago", "high", 1, "transfer_fail"),  # clean scoop, nothing spilled, nothing delivered
     ]
     frame = pd.DataFrame(rows)
-    frame["spilled_total"] = frame["spilled"]
-    frame.loc[5, "spilled_total"] = 3
+    frame["spilled_transfer"] = 0
+    frame.loc[5, "spilled_transfer"] = 3
     frame["transfer_ik_failures"] = [0, 0, 0, 0, 0, 0, 9]
     frame["transfer_max_joint_step_rad"] = [0.2, 0.2, 0.2, math.nan, math.nan, 0.2, 1.4]  # no transfer after a failed scoop
     data = failure_table(normalize_records(frame)).data.iloc[0]
     assert data["episodes"] == 7
     assert {k: data[f"{k}_k"] for k in ("task_success", "error", "scoop_spill", "scoop_failure", "transfer_spill", "not_delivered")} == {
         "task_success": 1, "error": 1, "scoop_spill": 2, "scoop_failure": 1, "transfer_spill": 1, "not_delivered": 1}
-    assert (data["transfer_unreachable_k"], data["transfers"]) == (1, 5)
+    assert (data["transfer_unreachable_k"], data["transfers"]) == (1, 4)  # the errored episode's transfer is not counted
+
+
+def test_failure_stages_partition_records_whose_flags_disagree():
+    # A record source that marks an episode both a success and a spill: counted once, as the spill.
+    frame = pd.DataFrame([episode("dp", "sago", "low", 0, "spill"), episode("dp", "sago", "low", 1, "success")])
+    frame.loc[0, "task_success"] = True
+    frame["spilled_transfer"] = 0
+    masks = failure_stages(normalize_records(frame))
+    counted = sum(masks[key].astype(int) for key in ("task_success", "error", "scoop_spill", "scoop_failure",
+                                                      "transfer_spill", "not_delivered"))
+    assert counted.tolist() == [1, 1] and masks["scoop_spill"].tolist() == [True, False]
 
 
 def test_failure_table_without_particle_totals_counts_the_failures_after_the_scoop_together(records):
@@ -142,8 +153,8 @@ def test_failure_table_without_particle_totals_counts_the_failures_after_the_sco
     assert (table.data["episodes"] == table.data[["task_success_k", "error_k", "scoop_spill_k", "scoop_failure_k",
                                                   "after_scoop_k"]].sum(axis=1)).all()
     assert table.data["transfer_spill_k"].isna().all()
-    assert table.display["Transfers reaching an unreachable pose"].eq(MISSING).all()
-    assert "lack `spilled_total`" in table.notes[0]
+    assert table.display["Transfers with an unreachable pose"].eq(MISSING).all()
+    assert "lack `spilled_transfer`" in table.notes[0]
 
 
 def test_flag_missing_outside_an_errored_episode_is_rejected():
