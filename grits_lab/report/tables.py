@@ -340,14 +340,14 @@ FAILURE_STAGES = (
 
 
 def failure_stages(rows: pd.DataFrame) -> dict[str, pd.Series]:
-    """Boolean masks over `rows` (normalized records), one per FAILURE_STAGES key.
+    """Boolean masks over `rows` (normalized records), one per FAILURE_STAGES key, and "after_scoop".
 
     Built in the task's order, each from what the earlier ones left, so they partition the rows
     whatever the record source: an error, then a spill during the scoop, then a scoop failure,
-    then success, and what is left failed after a clean scoop. That is split by `spilled_transfer`
-    (particles spilled in the transfer and pour, recorded by `grits-lab evaluate`) into
-    "transfer_spill" and "not_delivered"; without that column both are all-NaN masks and only
-    their union is known (`1 -` the other masks).
+    then success, and what is left ("after_scoop") failed after a clean scoop. That is split by
+    `spilled_transfer` (particles spilled in the transfer and pour, recorded by `grits-lab
+    evaluate`) into "transfer_spill" and "not_delivered"; without that column both are all-NaN
+    masks and only their union, "after_scoop", is known.
     """
     ok = ~rows["is_error"]
     scoop_spill = ok & rows["spillage"]
@@ -355,9 +355,9 @@ def failure_stages(rows: pd.DataFrame) -> dict[str, pd.Series]:
     clean_scoop = ok & ~scoop_spill & ~scoop_failure
     after_scoop = clean_scoop & ~rows["task_success"]
     masks = {"task_success": clean_scoop & rows["task_success"], "error": rows["is_error"], "scoop_spill": scoop_spill,
-             "scoop_failure": scoop_failure}
-    transfer_spilled = pd.to_numeric(rows.get("spilled_transfer", pd.Series(math.nan, index=rows.index)), errors="coerce")
-    if "spilled_transfer" in rows.columns and transfer_spilled[after_scoop].notna().all():
+             "scoop_failure": scoop_failure, "after_scoop": after_scoop}
+    transfer_spilled = pd.to_numeric(rows["spilled_transfer"], errors="coerce") if "spilled_transfer" in rows.columns else None
+    if transfer_spilled is not None and transfer_spilled[after_scoop].notna().all():
         masks["transfer_spill"] = after_scoop & (transfer_spilled > 0)
         masks["not_delivered"] = after_scoop & ~(transfer_spilled > 0)
     else:
@@ -386,17 +386,18 @@ def failure_table(episodes: pd.DataFrame | None) -> ReportTable:
                 shown[label] = MISSING
                 data[f"{key}_k"] = math.nan
                 if key == "not_delivered":
-                    k = n - sum(int(masks[other].sum()) for other in ("task_success", "error", "scoop_spill", "scoop_failure"))
+                    k = int(masks["after_scoop"].sum())
                     shown[label] = f"{k}/{n} (with the spills)"
                     data["after_scoop_k"] = k
             else:
                 k = int(mask.astype(bool).sum())
                 shown[label] = f"{k}/{n}"
                 data[f"{key}_k"] = k
-        ik = pd.to_numeric(rows["transfer_ik_failures"], errors="coerce") if "transfer_ik_failures" in rows.columns else None
-        transfers = (pd.to_numeric(rows["transfer_max_joint_step_rad"], errors="coerce").notna() & ~rows["is_error"]
-                     if "transfer_max_joint_step_rad" in rows.columns else None)
-        if ik is not None and transfers is not None and transfers.any():
+        recorded = {"transfer_ik_failures", "transfer_max_joint_step_rad"} <= set(rows.columns)
+        if recorded:
+            ik = pd.to_numeric(rows["transfer_ik_failures"], errors="coerce")
+            transfers = pd.to_numeric(rows["transfer_max_joint_step_rad"], errors="coerce").notna() & ~rows["is_error"]
+        if recorded and transfers.any():
             k = int(((ik > 0) & transfers).sum())
             shown["Transfers with an unreachable pose"] = f"{k}/{int(transfers.sum())}"
             data.update({"transfer_unreachable_k": k, "transfers": int(transfers.sum())})
