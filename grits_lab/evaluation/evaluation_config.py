@@ -50,9 +50,29 @@ class TransferSettings:
     pour_angle_deg: float = 120.0  # roll of the spoon about its x axis to empty it
     pour_steps: int = 20
     settle_steps: int = 15  # actions holding still after the pour before counting
+    # Before moving, check the path and pour on the arm's kinematic copy (grits_lab/sim/env.py
+    # `check_path`); a path with an unreachable pose, or one asking a joint to move more than
+    # `max_joint_step` rad in one action (the Panda moves at most 0.22-0.26 rad per 0.1 s: more is
+    # a flip to another arm posture, which throws the load), is replaced by the first alternative
+    # that passes: the lift with `alternative_level_steps` and the level spoon turned by
+    # `alternative_level_yaw_deg`, the pour from `alternative_pour_heights` and moved
+    # `alternative_pour_offsets` metres away from the robot's base. At most `max_checks` paths.
+    reach_check: bool = True
+    max_joint_step: float = 0.3
+    alternative_level_steps: list[int] = field(default_factory=lambda: [30])
+    alternative_level_yaw_deg: list[float] = field(default_factory=lambda: [-60.0, 60.0, -90.0, 90.0])
+    alternative_pour_heights: list[float] = field(default_factory=lambda: [0.09])
+    alternative_pour_offsets: list[float] = field(default_factory=lambda: [0.03])
+    max_checks: int = 16
 
     def __post_init__(self) -> None:
         require(self.clearance > 0, "transfer.clearance", self.clearance, "positive")
+        require(self.max_joint_step > 0, "transfer.max_joint_step", self.max_joint_step, "positive (rad per action)")
+        require(self.max_checks >= 1, "transfer.max_checks", self.max_checks, "at least 1")
+        require(all(int(n) >= 1 for n in self.alternative_level_steps), "transfer.alternative_level_steps",
+                self.alternative_level_steps, "a list of integers >= 1")
+        require(all(h > 0 for h in self.alternative_pour_heights), "transfer.alternative_pour_heights",
+                self.alternative_pour_heights, "a list of positive heights (m)")
         require(self.max_speed > 0, "transfer.max_speed", self.max_speed, "positive")
         require(self.pour_steps >= 1, "transfer.pour_steps", self.pour_steps, "at least 1")
         require(self.level_steps >= 1, "transfer.level_steps", self.level_steps, "at least 1")

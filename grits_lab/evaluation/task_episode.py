@@ -24,7 +24,7 @@ import numpy as np
 
 from grits_lab.evaluation.controllers import ObsHistory, is_still
 from grits_lab.evaluation.episode_scene import EpisodeScene
-from grits_lab.evaluation.transfer import Obstacle, locate_bowl, plan_transfer, pour_motion
+from grits_lab.evaluation.transfer import Obstacle, choose_transfer, locate_bowl
 from grits_lab.sim.env import matrix_to_pose9
 
 if TYPE_CHECKING:  # annotations only: no import cost, no cycle
@@ -194,7 +194,9 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     Besides the metrics: "ik_failures" (actions of the transfer and pour whose pose the arm could
     not reach) and "max_joint_step_rad" (the largest change of a commanded joint angle in one
     action, rad; the Panda moves at most 0.22-0.26 rad per 0.1 s action, and the flips to another
-    arm posture that throw a load measured 0.6-1.7 rad).
+    arm posture that throw a load measured 0.6-1.7 rad); "plan" (the option taken, transfer.py
+    `TransferOption.describe`), "reachable" (whether the reach check passed; None unchecked) and
+    "checks" (paths checked before moving).
     """
     target = locate_bowl(scene.object_points("target_bowl"))
     truth = np.asarray(env.target_bowl_pose(), dtype=np.float64)[:3, 3]
@@ -210,7 +212,9 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     max_step = settings.max_speed / env.config.control_hz
     # The robot's base stands at the world origin (grits_lab/sim/world.py): radial = away from it.
     heading = math.atan2(target.centre[1], target.centre[0]) if settings.heading == "radial" else None
-    path = plan_transfer(current, target, obstacles, settings.clearance, settings.pour_height, max_step, reach, settings.level_steps, heading)
+    check = (lambda actions, limit: env.check_path(actions, limit, grace=1)) if settings.reach_check else None
+    plan = choose_transfer(current, target, obstacles, settings, max_step, reach, heading, check)
+    path = plan.path
     ik_failures, joint_steps = 0, [0.0]
 
     def step(action: np.ndarray) -> None:
@@ -223,7 +227,7 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     for action in path:
         step(action)
     spilled_after_transfer = int(env.metrics()["spilled"])
-    pour = pour_motion(path[-1], settings.pour_angle_deg, settings.pour_steps)
+    pour = plan.pour
     for action in pour:
         step(action)
     for _ in range(settings.settle_steps):
@@ -236,6 +240,9 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
         "target_locate_error_m": float(np.linalg.norm(target.centre[:2] - truth[:2])),
         "target_fit_residual_m": target.residual,
         "transfer_steps": int(len(path) + len(pour) + settings.settle_steps),
+        "plan": plan.option.describe(),
+        "reachable": plan.reachable if plan.n_checks else None,
+        "checks": plan.n_checks,
     }
 
 
@@ -283,7 +290,8 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
     }
     transferred, spilled_total, transfer_time, final = 0, int(m["spilled"]), 0.0, m
     record.update({"target_locate_error_m": math.nan, "target_fit_residual_m": math.nan, "spilled_transfer": 0,
-                   "transfer_ik_failures": 0, "transfer_max_joint_step_rad": math.nan})
+                   "transfer_ik_failures": 0, "transfer_max_joint_step_rad": math.nan,
+                   "transfer_plan": "", "transfer_reachable": None, "transfer_checks": 0})
     if config.transfer.enabled and m["scooped"] > 0:
         t0 = time.perf_counter()
         tr = run_transfer(env, scene, config.transfer)
@@ -293,7 +301,8 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         spilled_total = int(tr["metrics"]["spilled"])
         record.update({"target_locate_error_m": tr["target_locate_error_m"], "target_fit_residual_m": tr["target_fit_residual_m"],
                        "spilled_transfer": max(0, spilled_total - int(m["spilled"])),
-                       "transfer_ik_failures": tr["ik_failures"], "transfer_max_joint_step_rad": tr["max_joint_step_rad"]})
+                       "transfer_ik_failures": tr["ik_failures"], "transfer_max_joint_step_rad": tr["max_joint_step_rad"],
+                       "transfer_plan": tr["plan"], "transfer_reachable": tr["reachable"], "transfer_checks": tr["checks"]})
     needed = 1 if env.food.success_rule == "items" else max(1, math.ceil(0.5 * int(m["scooped"])))
     record.update({
         "transferred": transferred,

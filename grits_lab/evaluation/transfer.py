@@ -20,8 +20,10 @@ its own x axis above the target's centre, then the spoon holds still while the f
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
+from typing import Any, Callable
 
 import numpy as np
 
@@ -110,14 +112,24 @@ def path_is_clear(path: np.ndarray, obstacles: list[Obstacle], spoon_reach: floa
 
 def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], clearance: float,
                   pour_height: float, max_step: float, spoon_reach: float, level_steps: int = 1,
-                  target_heading: float | None = None) -> np.ndarray:
+                  target_heading: float | None = None, level_yaw_offset: float = 0.0, pour_offset: float = 0.0) -> np.ndarray:
     """(T, 9) spoon path: up to a safe height while levelling over `level_steps` actions, across, down to
-    `pour_height` above the target's rim, level from the end of the lift on."""
+    `pour_height` above the target's rim, level from the end of the lift on.
+
+    level_yaw_offset: radians the level spoon's heading is turned from the scoop's during the lift;
+    pour_offset: metres the pour point moves from the target's centre away from the robot's base
+    (at the world origin), which the arm reaches more easily for bowls close to it.
+    """
     rotation = level_rotation(current)
+    if level_yaw_offset:
+        rotation = heading_rotation(math.atan2(rotation[1, 0], rotation[0, 0]) + level_yaw_offset)
     start = np.asarray(current[:3], dtype=np.float64)
     safe_z = max([start[2]] + [ob.top + clearance + spoon_reach for ob in obstacles])
-    above_target = np.array([target.centre[0], target.centre[1], safe_z])
-    pour_point = np.array([target.centre[0], target.centre[1], target.rim_height + pour_height])
+    centre = np.asarray(target.centre[:2], dtype=np.float64)
+    if pour_offset:
+        centre = centre + pour_offset * centre / max(float(np.linalg.norm(centre)), 1e-9)
+    above_target = np.array([centre[0], centre[1], safe_z])
+    pour_point = np.array([centre[0], centre[1], target.rim_height + pour_height])
     tipped = rot6d_to_matrix(np.asarray(current[3:9], dtype=np.float64))
     waypoints = _line(start, np.array([start[0], start[1], safe_z]), tipped, max_step, rotation, level_steps)
     lifted = len(waypoints) - 1  # the vertical lift leaves the source bowl by design
@@ -142,3 +154,101 @@ def pour_motion(pose: np.ndarray, angle_deg: float, steps: int) -> np.ndarray:
         roll = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
         out.append(_pose(np.asarray(pose[:3], dtype=np.float64), rot @ roll))
     return np.stack(out)
+
+
+@dataclass(frozen=True)
+class TransferOption:
+    """One way of carrying the spoon: the lift's levelling (actions, heading turn in degrees) and the pour (height, offset, m)."""
+
+    level_steps: int
+    level_yaw_deg: float
+    pour_height: float
+    pour_offset: float
+
+    def describe(self) -> str:
+        return (f"level over {self.level_steps} actions, heading {self.level_yaw_deg:+g} deg; "
+                f"pour {self.pour_height * 100:g} cm above the rim, {self.pour_offset * 100:+g} cm out")
+
+
+@dataclass
+class TransferPlan:
+    """The chosen transfer: path (T, 9) up to the pour point, pour (P, 9), the option that made them,
+    whether the check passed (`reachable`), how many options were checked (`n_checks`, 0 unchecked)."""
+
+    path: np.ndarray
+    pour: np.ndarray
+    option: TransferOption
+    reachable: bool
+    n_checks: int
+
+
+def transfer_options(settings: Any) -> list[TransferOption]:
+    """The options to try, in order: the configured one first; lifts keep the scoop's heading before
+    they turn it, and level over the configured actions before the alternatives; each lift with the
+    configured pour first, then the pour alternatives (`TransferSettings`, evaluation_config.py)."""
+    lifts = [(n, y) for y, n in itertools.product([0.0] + list(settings.alternative_level_yaw_deg),
+                                                  [settings.level_steps] + list(settings.alternative_level_steps))]
+    pours = [(h, o) for h, o in itertools.product([settings.pour_height] + list(settings.alternative_pour_heights),
+                                                  [0.0] + list(settings.alternative_pour_offsets))]
+    seen, out = set(), []
+    for (n, y), (h, o) in itertools.product(lifts, pours):
+        option = TransferOption(int(n), float(y), float(h), float(o))
+        if option not in seen:
+            seen.add(option)
+            out.append(option)
+    return out
+
+
+def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], settings: Any, max_step: float,
+                    spoon_reach: float, target_heading: float | None,
+                    check: Callable[[np.ndarray, float], Any] | None) -> TransferPlan:
+    """Plan the transfer and pour, checked for reach when `check` is given.
+
+    check(actions (T, 9), max_joint_step) -> a `PathCheck` (grits_lab.sim.env.ScoopEnv.check_path
+    with grace 1): the arm's answer to the actions, stopping at the first one stepping a joint more
+    than `settings.max_joint_step` rad or unreachable; the first action may be unreachable (it
+    starts from the scoop's last command, which the arm may have stopped short of). The first option (`transfer_options`) whose whole path and pour pass is taken; an option that
+    fails before the descent skips its remaining pour alternatives; after `settings.max_checks`
+    checks without a pass, the option that went farthest before its first failure is taken
+    (`reachable` False). Raises InputError when no option has a collision-free path.
+    """
+    options = transfer_options(settings)
+    best: tuple[int, TransferPlan] | None = None
+    n_checks, failed_lift = 0, None
+    for option in options:
+        if failed_lift == (option.level_steps, option.level_yaw_deg):
+            continue
+        path = plan_transfer(current, target, obstacles, settings.clearance, option.pour_height, max_step, spoon_reach,
+                             option.level_steps, target_heading, math.radians(option.level_yaw_deg), option.pour_offset)
+        pour = pour_motion(path[-1], settings.pour_angle_deg, settings.pour_steps)
+        if check is None:
+            return TransferPlan(path, pour, option, reachable=True, n_checks=0)
+        actions = np.concatenate([path, pour])
+        answer = check(actions, settings.max_joint_step)
+        n_checks += 1
+        passed = (answer.n_checked == len(actions) and not answer.unreachable[1:].any()
+                  and answer.max_joint_step <= settings.max_joint_step)
+        plan = TransferPlan(path, pour, option, passed, n_checks)
+        if passed:
+            return plan
+        reached = int(answer.n_checked) - 1  # actions before the failing one
+        if best is None or reached > best[0]:
+            best = (reached, plan)
+        if reached < len(path) - _descent_length(path):
+            failed_lift = (option.level_steps, option.level_yaw_deg)
+        if n_checks >= settings.max_checks:
+            break
+    assert best is not None
+    best[1].n_checks = n_checks
+    return best[1]
+
+
+def _descent_length(path: np.ndarray) -> int:
+    """Actions at the end of `path` that descend straight down to the pour point."""
+    xy = path[-1, :2]
+    n = 0
+    for pose in path[::-1]:
+        if np.linalg.norm(pose[:2] - xy) > 1e-6:
+            break
+        n += 1
+    return n

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -28,6 +28,29 @@ from grits_lab.sim.shapes import TARGET_BOWL, BowlGeometry, SpoonGeometry
 from grits_lab.sim.world import World, build_world, settle
 
 DEFAULT_FOOD = "mung_beans"
+
+
+@dataclass(frozen=True)
+class PathCheck:
+    """`ScoopEnv.check_path`'s answer, one entry per action checked: unreachable (T,) (an IK
+    residual over the tolerance on the way), joint_steps (T,) (the largest change of a commanded
+    joint over the action, rad), and the joint target at the end (7,)."""
+
+    unreachable: np.ndarray
+    joint_steps: np.ndarray
+    joints: np.ndarray
+
+    @property
+    def n_checked(self) -> int:
+        return int(len(self.unreachable))
+
+    @property
+    def n_unreachable(self) -> int:
+        return int(np.sum(self.unreachable))
+
+    @property
+    def max_joint_step(self) -> float:
+        return float(np.max(self.joint_steps, initial=0.0))
 
 
 def pose9_to_matrix(pose9: np.ndarray) -> np.ndarray:
@@ -188,13 +211,9 @@ class ScoopEnv:
         joints_before = self._joint_target.copy()
         failed = False
         done = 0
-        for k in range(pieces):
-            pose = interpolate_pose(start, target, (k + 1) / pieces)
-            ik = self.kinematics.solve(pose @ self._hand_in_spoon, self._joint_target, cfg.ik_position_tolerance, cfg.ik_orientation_tolerance)
-            if ik.ok:
-                self._joint_target = ik.joints
-            else:
-                failed = True
+        for k, joints, reached in self._track(start, target, self._joint_target):
+            self._joint_target = joints
+            failed |= not reached
             world.command_joints(self._joint_target)
             n = (steps * (k + 1)) // pieces - done
             world.step(n)
@@ -207,6 +226,42 @@ class ScoopEnv:
         spilled = self.tracker.update(self._classify(), self._spoon_outside_source())
         truncated = self.step_count >= cfg.max_episode_steps
         return self._obs(), -float(spilled - before), False, truncated, self._info(ik_failure=failed, joint_step=joint_step)
+
+    def _track(self, start: np.ndarray, target: np.ndarray, joints: np.ndarray) -> Iterator[tuple[int, np.ndarray, bool]]:
+        """The joint targets of one action: for each of the `ik_per_action` pieces of the pose path
+        from (4, 4) `start` to `target`, (piece index, joint target (7,), whether IK reached the piece).
+        An unreachable piece keeps the last reachable joint target."""
+        cfg = self.config
+        for k in range(cfg.ik_per_action):
+            pose = interpolate_pose(start, target, (k + 1) / cfg.ik_per_action)
+            ik = self.kinematics.solve(pose @ self._hand_in_spoon, joints, cfg.ik_position_tolerance, cfg.ik_orientation_tolerance)
+            if ik.ok:
+                joints = ik.joints
+            yield k, joints, ik.ok
+
+    def check_path(self, path: np.ndarray, max_joint_step: float = math.inf, grace: int = 0) -> PathCheck:
+        """What the arm would do with the actions `path` (T, 9) from its present joint target, on the
+        kinematic copy only (the world is not touched): the same IK tracking as `step`.
+
+        With a finite `max_joint_step` (rad), stops after the first action that steps a joint more
+        than that, or that is unreachable and comes after the first `grace` actions (an action
+        starts from the last commanded pose, which may be one the arm stopped short of). Raises
+        RuntimeError before `reset`.
+        """
+        self._require_world()
+        joints, start = self._joint_target.copy(), self._pose_target
+        unreachable, steps = [], []
+        for i, action in enumerate(np.asarray(path, dtype=np.float64).reshape(-1, 9)):
+            target = pose9_to_matrix(action)
+            before, failed = joints, False
+            for _, joints, reached in self._track(start, target, joints):
+                failed |= not reached
+            start = target
+            unreachable.append(failed)
+            steps.append(float(np.abs(joints - before).max()))
+            if math.isfinite(max_joint_step) and ((failed and i >= grace) or steps[-1] > max_joint_step):
+                break
+        return PathCheck(np.array(unreachable, dtype=bool), np.array(steps), joints)
 
     @staticmethod
     def _far_at_rest(world: World, a: np.ndarray, b: np.ndarray, distance: float) -> np.ndarray:

@@ -81,3 +81,62 @@ def test_a_tipped_spoon_is_levelled_gradually_and_arrives_pointing_away_from_the
     np.testing.assert_allclose(final[:, 2], [0, 0, 1], atol=1e-6)  # level at the pour point
     one_jump = plan_transfer(start, target, [], 0.04, 0.05, 0.012, 0.036)
     assert _angles_deg(np.concatenate([start[None], one_jump]))[0] > 15
+
+
+def _scene_obstacles(env, target_xy, seed=2):
+    env.reset(seed=seed, options={"food": "chocolate_balls", "level": "low", "target_xy": target_xy})
+    scene = EpisodeScene(env, builder_for_env(CloudConfig(n_points=32, cad_surface_samples=400), env), seed=seed)
+    target = locate_bowl(scene.object_points("target_bowl"))
+    src, source = env.world.source_bowl_position, env.world.source_geometry
+    obstacles = [Obstacle(src[:2], source.outer_radius, src[2] + source.depth),
+                 Obstacle(target.centre[:2], target.rim_radius + 0.01, target.rim_height)]
+    return scene, target, obstacles
+
+
+def test_transfer_options_start_with_the_configured_one_and_never_repeat():
+    from grits_lab.evaluation.evaluation_config import TransferSettings
+    from grits_lab.evaluation.transfer import TransferOption, transfer_options
+
+    settings = TransferSettings(level_steps=10, pour_height=0.05)
+    options = transfer_options(settings)
+    assert options[0] == TransferOption(10, 0.0, 0.05, 0.0)
+    assert options[1] == TransferOption(10, 0.0, 0.05, 0.03)  # the pour alternatives of a lift come before the next lift
+    assert len(options) == len(set(options)) == 2 * 5 * 2 * 2
+    assert transfer_options(TransferSettings(alternative_level_steps=[10], alternative_level_yaw_deg=[0.0],
+                                             alternative_pour_heights=[0.05], alternative_pour_offsets=[0.0])) == options[:1]
+
+
+def test_an_unreachable_pour_is_replaced_by_one_the_arm_reaches(env):
+    """A target close to the robot's base: pouring 5 cm above its centre folds the elbow past its
+    limit; the check finds it before moving and pours 3 cm farther out, which the arm reaches."""
+    import math
+
+    from grits_lab.evaluation.evaluation_config import TransferSettings
+    from grits_lab.evaluation.transfer import choose_transfer
+    from grits_lab.sim.env import matrix_to_pose9
+
+    scene, target, obstacles = _scene_obstacles(env, (0.30, 0.20))
+    settings = TransferSettings()
+    current = matrix_to_pose9(scene.spoon_pose())
+    heading = math.atan2(target.centre[1], target.centre[0])
+    unchecked = choose_transfer(current, target, obstacles, settings, 0.012, 0.036, heading, check=None)
+    assert unchecked.option.pour_offset == 0.0 and unchecked.n_checks == 0
+    assert env.check_path(np.concatenate([unchecked.path, unchecked.pour])).unreachable[1:].any()
+    plan = choose_transfer(current, target, obstacles, settings, 0.012, 0.036, heading,
+                           check=lambda actions, limit: env.check_path(actions, limit, grace=1))
+    assert plan.reachable and plan.n_checks >= 2 and plan.option != unchecked.option
+    infos = [env.step(a)[4] for a in np.concatenate([plan.path, plan.pour])]
+    assert not any(i["ik_failure"] for i in infos[1:])
+    assert max(i["joint_step"] for i in infos) <= settings.max_joint_step
+    centre = np.asarray(target.centre[:2])
+    assert np.linalg.norm(plan.path[-1, :2] - centre) < target.rim_radius  # still above the bowl
+
+
+def test_a_non_positive_joint_step_limit_is_a_config_error():
+    from grits_lab.errors import ConfigError
+    from grits_lab.evaluation.evaluation_config import TransferSettings
+
+    with pytest.raises(ConfigError, match="transfer.max_joint_step"):
+        TransferSettings(max_joint_step=0.0)
+    with pytest.raises(ConfigError, match="transfer.alternative_level_steps"):
+        TransferSettings(alternative_level_steps=[0])

@@ -207,6 +207,32 @@ def test_joint_step_is_the_largest_commanded_joint_change_of_the_action(env):
     assert 1e-4 < step < 0.22
 
 
+def test_check_path_answers_what_step_then_does_without_touching_the_world(env):
+    obs, _ = env.reset(seed=0, options={"food": "orange"})
+    start = obs["ee_pose"].astype(np.float64)
+    path = np.tile(start, (6, 1))
+    path[:3, 2] += np.linspace(0.01, 0.03, 3)  # up 3 cm
+    path[3:, :3] = [1.6, 0.0, 0.3]  # then out of the arm's reach
+    spoon_before = env.world.spoon_matrix().copy()
+    check = env.check_path(path)
+    np.testing.assert_array_equal(env.world.spoon_matrix(), spoon_before)
+    assert env.step_count == 0
+    infos = [env.step(a)[4] for a in path]
+    np.testing.assert_array_equal(check.unreachable, [i["ik_failure"] for i in infos])
+    np.testing.assert_array_equal(check.joint_steps, [i["joint_step"] for i in infos])
+    assert check.unreachable.tolist() == [False] * 3 + [True] * 3
+
+
+def test_check_path_stops_at_the_first_failure_after_the_grace(env):
+    obs, _ = env.reset(seed=0, options={"food": "orange"})
+    far = np.tile(obs["ee_pose"].astype(np.float64), (5, 1))
+    far[:, :3] = [1.6, 0.0, 0.3]
+    assert env.check_path(far).n_checked == 5  # no limit: every action is checked
+    assert env.check_path(far, max_joint_step=10.0).n_checked == 1
+    assert env.check_path(far, max_joint_step=10.0, grace=2).n_checked == 3
+    assert env.check_path(far, max_joint_step=0.3, grace=2).n_checked == 1  # reaching out steps the joints > 0.3 rad
+
+
 def test_bad_actions_and_options_are_input_errors(env):
     env.reset(seed=0, options={"food": "orange"})
     with pytest.raises(InputError):
