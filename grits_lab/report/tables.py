@@ -329,6 +329,10 @@ def setting_table(episodes: pd.DataFrame) -> ReportTable:
 
 # Why a task failed, by the stage that ended it (grits_lab/evaluation/task_episode.py): each
 # episode falls in exactly one of these, in this order.
+# A joint moving more than this in one 0.1 s action is the IK leaving for another arm posture:
+# reachable transfers measured at most 0.40 rad, the flips 0.5-1.8 rad (docs/results.md).
+POSTURE_FLIP_RAD = 0.5
+
 FAILURE_STAGES = (
     ("task_success", "Task success"),
     ("error", "Error"),
@@ -399,11 +403,25 @@ def failure_table(episodes: pd.DataFrame | None) -> ReportTable:
             transfers = pd.to_numeric(rows["transfer_max_joint_step_rad"], errors="coerce").notna() & ~rows["is_error"]
         if recorded and transfers.any():
             k = int(((ik > 0) & transfers).sum())
-            shown["Transfers with an unreachable pose"] = f"{k}/{int(transfers.sum())}"
-            data.update({"transfer_unreachable_k": k, "transfers": int(transfers.sum())})
+            n_transfers = int(transfers.sum())
+            step = pd.to_numeric(rows["transfer_max_joint_step_rad"], errors="coerce")
+            flips = int(((step > POSTURE_FLIP_RAD) & transfers).sum())
+            shown["Transfers with an unreachable pose"] = f"{k}/{n_transfers}"
+            shown["Posture flips"] = f"{flips}/{n_transfers}"
+            data.update({"transfer_unreachable_k": k, "posture_flip_k": flips, "transfers": n_transfers})
         else:
-            shown["Transfers with an unreachable pose"] = MISSING
-            data.update({"transfer_unreachable_k": math.nan, "transfers": math.nan})
+            shown["Transfers with an unreachable pose"] = shown["Posture flips"] = MISSING
+            data.update({"transfer_unreachable_k": math.nan, "posture_flip_k": math.nan, "transfers": math.nan})
+        checked = (pd.Series(rows["transfer_reachable"].tolist(), index=rows.index, dtype=object)
+                   if "transfer_reachable" in rows.columns else pd.Series(None, index=rows.index, dtype=object))
+        checked = checked.map(lambda v: None if v is None or (isinstance(v, float) and math.isnan(v)) else bool(v))
+        if checked.notna().any():
+            failed = int((checked == False).sum())  # noqa: E712 (None is neither)
+            shown["Reach check failed"] = f"{failed}/{int(checked.notna().sum())}"
+            data.update({"reach_check_failed_k": failed, "reach_checked": int(checked.notna().sum())})
+        else:
+            shown["Reach check failed"] = MISSING
+            data.update({"reach_check_failed_k": math.nan, "reach_checked": math.nan})
         display_rows.append(shown)
         data_rows.append(data)
     notes = [
@@ -413,7 +431,13 @@ def failure_table(episodes: pd.DataFrame | None) -> ReportTable:
         "back into the source bowl.",
         "Transfers with an unreachable pose: transfers (and pours) of episodes without an error with at least one "
         "action whose pose the arm could not reach (`transfer_ik_failures`); the IK may then find the pose in "
-        "another arm posture, and the flip throws the load.",
+        "another arm posture, and the flip throws the load. The first action of a checked transfer may be one: it "
+        "starts from the scoop's last command, which the arm may have stopped short of.",
+        f"Posture flips: transfers in which a commanded joint moved more than {POSTURE_FLIP_RAD} rad in one 0.1 s "
+        "action (`transfer_max_joint_step_rad`; the Panda moves at most 0.22-0.26 rad, and the flips measured "
+        "0.5-1.8 rad).",
+        "Reach check failed: transfers for which no option of the reach check (docs/evaluation.md) passed "
+        "(`transfer_reachable`); the one that went farthest was executed. '-' where the records predate the check.",
     ]
     if merged:
         notes.insert(0, "(with the spills): these records lack `spilled_transfer`, so the failures after a clean "

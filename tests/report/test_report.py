@@ -135,6 +135,20 @@ def test_failure_table_counts_each_episode_once_at_the_stage_that_ended_it():
     assert {k: data[f"{k}_k"] for k in ("task_success", "error", "scoop_spill", "scoop_failure", "transfer_spill", "not_delivered")} == {
         "task_success": 1, "error": 1, "scoop_spill": 2, "scoop_failure": 1, "transfer_spill": 1, "not_delivered": 1}
     assert (data["transfer_unreachable_k"], data["transfers"]) == (1, 4)  # the errored episode's transfer is not counted
+    assert data["posture_flip_k"] == 1  # the 1.4 rad step
+    assert math.isnan(data["reach_check_failed_k"])  # records without the reach check
+
+
+def test_failure_table_counts_transfers_whose_reach_check_failed():
+    rows = [episode("dp", "sago", "low", t, "success") for t in range(3)] + [episode("dp", "sago", "low", 3, "scoop_fail")]
+    frame = pd.DataFrame(rows)
+    frame["spilled_transfer"] = 0
+    frame["transfer_ik_failures"] = [1, 0, 2, 0]
+    frame["transfer_max_joint_step_rad"] = [0.2, 0.2, 0.6, math.nan]
+    frame["transfer_reachable"] = [True, True, False, None]  # no transfer after the failed scoop
+    data = failure_table(normalize_records(frame)).data.iloc[0]
+    assert (data["reach_check_failed_k"], data["reach_checked"]) == (1, 3)
+    assert (data["posture_flip_k"], data["transfers"]) == (1, 3)
 
 
 def test_failure_stages_partition_records_whose_flags_disagree():
@@ -154,6 +168,7 @@ def test_failure_table_without_particle_totals_counts_the_failures_after_the_sco
                                                   "after_scoop_k"]].sum(axis=1)).all()
     assert table.data["transfer_spill_k"].isna().all()
     assert table.display["Transfers with an unreachable pose"].eq(MISSING).all()
+    assert table.display["Reach check failed"].eq(MISSING).all()
     assert "lack `spilled_transfer`" in table.notes[0]
 
 
