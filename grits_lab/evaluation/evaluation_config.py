@@ -56,13 +56,14 @@ class TransferSettings:
     # a flip to another arm posture, which throws the load), is replaced by the first alternative
     # that passes: the lift with `alternative_level_steps` and the level spoon turned by
     # `alternative_level_yaw_deg`, the pour from `alternative_pour_heights` and moved
-    # `alternative_pour_offsets` metres away from the robot's base. At most `max_checks` paths.
+    # `alternative_pour_offsets` metres away from the robot's base (negative: towards it).
+    # At most `max_checks` paths (about 1 s each on one core).
     reach_check: bool = True
     max_joint_step: float = 0.3
     alternative_level_steps: list[int] = field(default_factory=lambda: [30])
     alternative_level_yaw_deg: list[float] = field(default_factory=lambda: [-60.0, 60.0, -90.0, 90.0])
     alternative_pour_heights: list[float] = field(default_factory=lambda: [0.09])
-    alternative_pour_offsets: list[float] = field(default_factory=lambda: [0.03])
+    alternative_pour_offsets: list[float] = field(default_factory=lambda: [0.03, -0.03])
     max_checks: int = 16
 
     def __post_init__(self) -> None:

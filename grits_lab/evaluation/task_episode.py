@@ -212,7 +212,7 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     max_step = settings.max_speed / env.config.control_hz
     # The robot's base stands at the world origin (grits_lab/sim/world.py): radial = away from it.
     heading = math.atan2(target.centre[1], target.centre[0]) if settings.heading == "radial" else None
-    check = (lambda actions, limit: env.check_path(actions, limit, grace=1)) if settings.reach_check else None
+    check = env.check_path if settings.reach_check else None
     plan = choose_transfer(current, target, obstacles, settings, max_step, reach, heading, check)
     path = plan.path
     ik_failures, joint_steps = 0, [0.0]

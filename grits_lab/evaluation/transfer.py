@@ -201,21 +201,21 @@ def transfer_options(settings: Any) -> list[TransferOption]:
 
 def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], settings: Any, max_step: float,
                     spoon_reach: float, target_heading: float | None,
-                    check: Callable[[np.ndarray, float], Any] | None) -> TransferPlan:
+                    check: Callable[[np.ndarray], Any] | None) -> TransferPlan:
     """Plan the transfer and pour, checked for reach when `check` is given.
 
-    check(actions (T, 9), max_joint_step) -> a `PathCheck` (grits_lab.sim.env.ScoopEnv.check_path
-    with grace 1): the arm's answer to the actions, stopping at the first one stepping a joint more
-    than `settings.max_joint_step` rad or unreachable; the first action may be unreachable (it
-    starts from the scoop's last command, which the arm may have stopped short of). The first option (`transfer_options`) whose whole path and pour pass is taken; an option that
-    fails before the descent skips its remaining pour alternatives; after `settings.max_checks`
-    checks without a pass, the option that went farthest before its first failure is taken
-    (`reachable` False). Raises InputError when no option has a collision-free path.
+    check(actions (T, 9)) -> a `PathCheck` (grits_lab.sim.env.ScoopEnv.check_path): per action,
+    whether the arm cannot reach it and how far it steps a joint (rad). An option passes when no
+    action steps a joint more than `settings.max_joint_step` and none after the first is
+    unreachable (the first starts from the scoop's last command, which the arm may have stopped
+    short of). The first option (`transfer_options`) that passes is taken; a lift that fails
+    before the spoon leaves the vertical lift skips its other pours. After `settings.max_checks`
+    checks without a pass, the option with the smallest joint step (no smaller than the limit),
+    then the fewest unreachable actions, is taken, with `reachable` False.
     """
-    options = transfer_options(settings)
-    best: tuple[int, TransferPlan] | None = None
+    best: tuple[tuple[float, int], TransferPlan] | None = None
     n_checks, failed_lift = 0, None
-    for option in options:
+    for option in transfer_options(settings):
         if failed_lift == (option.level_steps, option.level_yaw_deg):
             continue
         path = plan_transfer(current, target, obstacles, settings.clearance, option.pour_height, max_step, spoon_reach,
@@ -223,18 +223,18 @@ def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[O
         pour = pour_motion(path[-1], settings.pour_angle_deg, settings.pour_steps)
         if check is None:
             return TransferPlan(path, pour, option, reachable=True, n_checks=0)
-        actions = np.concatenate([path, pour])
-        answer = check(actions, settings.max_joint_step)
+        answer = check(np.concatenate([path, pour]))
         n_checks += 1
-        passed = (answer.n_checked == len(actions) and not answer.unreachable[1:].any()
-                  and answer.max_joint_step <= settings.max_joint_step)
-        plan = TransferPlan(path, pour, option, passed, n_checks)
-        if passed:
+        bad = answer.unreachable.copy()
+        bad[0] = False
+        bad |= answer.joint_steps > settings.max_joint_step
+        plan = TransferPlan(path, pour, option, not bad.any(), n_checks)
+        if plan.reachable:
             return plan
-        reached = int(answer.n_checked) - 1  # actions before the failing one
-        if best is None or reached > best[0]:
-            best = (reached, plan)
-        if reached < len(path) - _descent_length(path):
+        key = (max(float(answer.joint_steps.max()), settings.max_joint_step), int(answer.unreachable[1:].sum()))
+        if best is None or key < best[0]:
+            best = (key, plan)
+        if int(np.argmax(bad)) < _lift_length(path):
             failed_lift = (option.level_steps, option.level_yaw_deg)
         if n_checks >= settings.max_checks:
             break
@@ -243,11 +243,11 @@ def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[O
     return best[1]
 
 
-def _descent_length(path: np.ndarray) -> int:
-    """Actions at the end of `path` that descend straight down to the pour point."""
-    xy = path[-1, :2]
+def _lift_length(path: np.ndarray) -> int:
+    """Actions at the start of `path` that rise straight up from where the spoon was."""
+    xy = path[0, :2]
     n = 0
-    for pose in path[::-1]:
+    for pose in path:
         if np.linalg.norm(pose[:2] - xy) > 1e-6:
             break
         n += 1

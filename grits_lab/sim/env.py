@@ -239,19 +239,16 @@ class ScoopEnv:
                 joints = ik.joints
             yield k, joints, ik.ok
 
-    def check_path(self, path: np.ndarray, max_joint_step: float = math.inf, grace: int = 0) -> PathCheck:
+    def check_path(self, path: np.ndarray) -> PathCheck:
         """What the arm would do with the actions `path` (T, 9) from its present joint target, on the
-        kinematic copy only (the world is not touched): the same IK tracking as `step`.
-
-        With a finite `max_joint_step` (rad), stops after the first action that steps a joint more
-        than that, or that is unreachable and comes after the first `grace` actions (an action
-        starts from the last commanded pose, which may be one the arm stopped short of). Raises
-        RuntimeError before `reset`.
+        kinematic copy only (the world is not touched): the same IK tracking as `step`, so entry t
+        is what `step(path[t])` would report as `ik_failure` and `joint_step`. Raises RuntimeError
+        before `reset`.
         """
         self._require_world()
         joints, start = self._joint_target.copy(), self._pose_target
         unreachable, steps = [], []
-        for i, action in enumerate(np.asarray(path, dtype=np.float64).reshape(-1, 9)):
+        for action in np.asarray(path, dtype=np.float64).reshape(-1, 9):
             target = pose9_to_matrix(action)
             before, failed = joints, False
             for _, joints, reached in self._track(start, target, joints):
@@ -259,8 +256,6 @@ class ScoopEnv:
             start = target
             unreachable.append(failed)
             steps.append(float(np.abs(joints - before).max()))
-            if math.isfinite(max_joint_step) and ((failed and i >= grace) or steps[-1] > max_joint_step):
-                break
         return PathCheck(np.array(unreachable, dtype=bool), np.array(steps), joints)
 
     @staticmethod

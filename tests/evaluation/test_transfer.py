@@ -101,7 +101,7 @@ def test_transfer_options_start_with_the_configured_one_and_never_repeat():
     options = transfer_options(settings)
     assert options[0] == TransferOption(10, 0.0, 0.05, 0.0)
     assert options[1] == TransferOption(10, 0.0, 0.05, 0.03)  # the pour alternatives of a lift come before the next lift
-    assert len(options) == len(set(options)) == 2 * 5 * 2 * 2
+    assert len(options) == len(set(options)) == 2 * 5 * 2 * 3  # level steps x headings x pour heights x offsets
     assert transfer_options(TransferSettings(alternative_level_steps=[10], alternative_level_yaw_deg=[0.0],
                                              alternative_pour_heights=[0.05], alternative_pour_offsets=[0.0])) == options[:1]
 
@@ -122,8 +122,7 @@ def test_an_unreachable_pour_is_replaced_by_one_the_arm_reaches(env):
     unchecked = choose_transfer(current, target, obstacles, settings, 0.012, 0.036, heading, check=None)
     assert unchecked.option.pour_offset == 0.0 and unchecked.n_checks == 0
     assert env.check_path(np.concatenate([unchecked.path, unchecked.pour])).unreachable[1:].any()
-    plan = choose_transfer(current, target, obstacles, settings, 0.012, 0.036, heading,
-                           check=lambda actions, limit: env.check_path(actions, limit, grace=1))
+    plan = choose_transfer(current, target, obstacles, settings, 0.012, 0.036, heading, check=env.check_path)
     assert plan.reachable and plan.n_checks >= 2 and plan.option != unchecked.option
     infos = [env.step(a)[4] for a in np.concatenate([plan.path, plan.pour])]
     assert not any(i["ik_failure"] for i in infos[1:])
@@ -140,3 +139,26 @@ def test_a_non_positive_joint_step_limit_is_a_config_error():
         TransferSettings(max_joint_step=0.0)
     with pytest.raises(ConfigError, match="transfer.alternative_level_steps"):
         TransferSettings(alternative_level_steps=[0])
+
+
+def test_without_a_passing_option_the_smallest_joint_step_is_taken():
+    """Every option fails; the fallback prefers no flip over fewer unreachable poses."""
+    from types import SimpleNamespace
+
+    from grits_lab.evaluation.evaluation_config import TransferSettings
+    from grits_lab.evaluation.transfer import BowlEstimate, choose_transfer
+
+    settings = TransferSettings(alternative_level_steps=[], alternative_level_yaw_deg=[-60.0],
+                                alternative_pour_heights=[], alternative_pour_offsets=[])
+    start = np.array([0.6, -0.1, 0.12, 1, 0, 0, 0, 1, 0], dtype=np.float32)
+    target = BowlEstimate(np.array([0.45, 0.3, 0.0]), 0.06, 0.05, 100, 0.0)
+    answers = iter([(2, 1.4), (9, 0.35)])  # (unreachable actions, largest joint step) of each option
+
+    def check(actions):
+        n_bad, step = next(answers)
+        unreachable = np.zeros(len(actions), dtype=bool)
+        unreachable[-n_bad:] = True  # at the pour: a failure after the lift
+        return SimpleNamespace(unreachable=unreachable, joint_steps=np.full(len(actions), step))
+
+    plan = choose_transfer(start, target, [], settings, 0.012, 0.036, None, check)
+    assert (plan.option.level_yaw_deg, plan.reachable, plan.n_checks) == (-60.0, False, 2)

@@ -223,16 +223,6 @@ def test_check_path_answers_what_step_then_does_without_touching_the_world(env):
     assert check.unreachable.tolist() == [False] * 3 + [True] * 3
 
 
-def test_check_path_stops_at_the_first_failure_after_the_grace(env):
-    obs, _ = env.reset(seed=0, options={"food": "orange"})
-    far = np.tile(obs["ee_pose"].astype(np.float64), (5, 1))
-    far[:, :3] = [1.6, 0.0, 0.3]
-    assert env.check_path(far).n_checked == 5  # no limit: every action is checked
-    assert env.check_path(far, max_joint_step=10.0).n_checked == 1
-    assert env.check_path(far, max_joint_step=10.0, grace=2).n_checked == 3
-    assert env.check_path(far, max_joint_step=0.3, grace=2).n_checked == 1  # reaching out steps the joints > 0.3 rad
-
-
 def test_bad_actions_and_options_are_input_errors(env):
     env.reset(seed=0, options={"food": "orange"})
     with pytest.raises(InputError):
