@@ -44,6 +44,19 @@ def test_shipped_config_loads(path):
     assert _loader(path)(path) is not None
 
 
+@pytest.mark.parametrize("path", sorted((ROOT / "experiments" / "transfer_calibration").glob("*.yaml")), ids=lambda p: p.name)
+def test_transfer_calibration_overrides_load_onto_the_protocol_on_training_foods(path):
+    from grits_lab.config import load_yaml
+    from grits_lab.evaluation.evaluation_config import load_evaluation_config
+    from grits_lab.tune.study_config import load_study_config
+
+    config = load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(path)))
+    protocol = load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml")
+    assert not set(config.foods) & set(protocol.foods)  # calibrated on training foods, never the unseen ones
+    validation = load_study_config(ROOT / "sweeps" / "grits_cpu.yaml").validation
+    assert (config.seed, sorted(config.foods)) == (validation.seed, sorted(validation.foods))
+
+
 @pytest.mark.parametrize("guidance, fragment", [
     ({"threshold": 30}, "unknown key `guidance.threshold`"),
     ({"rho": -1.0}, "`guidance.rho` must be non-negative"),
