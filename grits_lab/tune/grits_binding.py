@@ -35,7 +35,7 @@ class GritsEvaluator:
         for path in ref.checkpoints:
             if not Path(path).is_file():
                 raise InputError(f"checkpoint not found: {path} (listed in `evaluation.checkpoints`; train it first)")
-        self._evaluation = load_evaluation_config(ref.config)
+        self._evaluation = load_evaluation_config(ref.config, ref.overrides)
         _check_against_evaluation(self._evaluation, ref.method)
         self._method = ref.method
 

@@ -2,8 +2,9 @@
 
 Everything here is recomputed from the storage, so `grits-lab sweep --report-only` regenerates
 the outputs of a study run by other machines. The best-parameter file, and each Pareto-front
-trial's file under `front/`, hold only the `guidance: {rho, s}` section, which `grits-lab
-evaluate` takes as an override.
+trial's file under `front/`, hold the trial's `guidance: {rho, s}` on top of the sweep's
+`evaluation.overrides` (less the episode grid), which `grits-lab evaluate` takes as an override:
+a sweep tuned on the normalized guidance step hands on `step: normalized` with its rho.
 """
 
 from __future__ import annotations
@@ -23,6 +24,9 @@ from grits_lab.tune.study import (
     ENQUEUED_ATTR, ERROR_ATTR, REQUEUED_ATTR, RETRY_OF_ATTR, WORKER_ATTR,
 )
 
+# Keys of `evaluation.overrides` that choose episodes or outputs, not how GRITS runs: an override file
+# handed to another evaluation leaves them to that evaluation.
+GRID_KEYS = ("run_id", "output_dir", "methods", "foods", "levels", "trials", "seed")
 METRIC_ATTRS = ("success_rate", "spillage_rate", "scoop_failure_rate", "n_episodes", "n_errors")
 
 
@@ -104,7 +108,7 @@ def best_trial(study: optuna.Study, config: StudyConfig) -> tuple[FrozenTrial | 
 
 
 def default_trial(study: optuna.Study, config: StudyConfig) -> FrozenTrial | None:
-    """The completed trial of the first enqueued point (the paper's defaults), if any."""
+    """The completed trial of the first enqueued point (the paper's defaults in the shipped sweeps), if any."""
     if not config.enqueue:
         return None
     point = config.enqueue[0]
@@ -167,11 +171,18 @@ def _rates_line(t: FrozenTrial) -> str:
             f"scoop failure {a['scoop_failure_rate']:.3f} over {a['n_episodes']} episodes")
 
 
-def _guidance_override(header: list[str], trial: FrozenTrial) -> str:
-    """`# header` lines and how to use the file, then `guidance: {rho, s}` of `trial`: an override for `grits-lab evaluate --override`."""
-    usage = "# Pass it to `grits-lab evaluate` as an override of the evaluation config's guidance section."
-    body = yaml.safe_dump({"guidance": {"rho": float(trial.params["rho"]), "s": int(trial.params["s"])}},
-                          sort_keys=False)
+def guidance_override(config: StudyConfig, trial: FrozenTrial) -> dict:
+    """What `trial` ran with, as an evaluation override: the sweep's `evaluation.overrides` less
+    GRID_KEYS, with `guidance.rho` and `guidance.s` set to the trial's."""
+    override = {k: v for k, v in config.evaluation.overrides.items() if k not in GRID_KEYS}
+    override["guidance"] = {**override.get("guidance", {}), "rho": float(trial.params["rho"]), "s": int(trial.params["s"])}
+    return override
+
+
+def _guidance_override(config: StudyConfig, header: list[str], trial: FrozenTrial) -> str:
+    """`# header` lines and how to use the file, then `guidance_override`: for `grits-lab evaluate --override`."""
+    usage = "# Pass it to `grits-lab evaluate` as an override of the evaluation config."
+    body = yaml.safe_dump(guidance_override(config, trial), sort_keys=False)
     return "\n".join([*header, usage]) + "\n" + body
 
 
@@ -183,7 +194,7 @@ def _write_front(config: StudyConfig, front: list[FrozenTrial], folder: Path, la
         keep.add(name)
         header = [f"# Pareto-front trial {t.number} of sweep `{config.study_name}` (maximize success, minimize spillage).",
                   f"# Evaluator: {label}.", f"# This trial: {_rates_line(t)}."]
-        write_text_atomic(folder / name, _guidance_override(header, t))
+        write_text_atomic(folder / name, _guidance_override(config, header, t))
     if folder.is_dir():
         for stale in folder.glob("trial_*.yaml"):
             if stale.name not in keep:
@@ -197,9 +208,9 @@ def _best_yaml(config: StudyConfig, best: FrozenTrial, defaults: FrozenTrial | N
         f"# This trial: {_rates_line(best)}.",
     ]
     if defaults is not None:
-        header.append(f"# Paper defaults rho={defaults.params['rho']:g} s={defaults.params['s']} "
+        header.append(f"# First enqueued point rho={defaults.params['rho']:g} s={defaults.params['s']} "
                       f"(trial {defaults.number}): {_rates_line(defaults)}.")
-    return _guidance_override(header, best)
+    return _guidance_override(config, header, best)
 
 
 def plot_tradeoff(study: optuna.Study, config: StudyConfig, path: Path, label: str) -> str:
@@ -224,7 +235,8 @@ def plot_tradeoff(study: optuna.Study, config: StudyConfig, path: Path, label: s
     defaults = default_trial(study, config)
     if defaults is not None:
         ax.scatter([defaults.user_attrs["spillage_rate"]], [defaults.user_attrs["success_rate"]], marker="*",
-                   s=250, facecolors="none", edgecolors="tab:orange", linewidths=1.5, label="paper defaults")
+                   s=250, facecolors="none", edgecolors="tab:orange", linewidths=1.5,
+                   label=f"first enqueued (rho={defaults.params['rho']:g}, s={defaults.params['s']})")
     best, _ = best_trial(study, config)
     if best is not None:
         ax.scatter([best.user_attrs["spillage_rate"]], [best.user_attrs["success_rate"]], marker="o",

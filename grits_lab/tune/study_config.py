@@ -12,9 +12,9 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar, Literal
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
-from grits_lab.config import config_fingerprint, load_config, require
+from grits_lab.config import config_fingerprint, config_to_dict, load_config, require
 from grits_lab.errors import ConfigError, InputError
 from grits_lab.evaluation.grid import EpisodeGrid, EpisodeKey
 
@@ -140,11 +140,15 @@ class EvaluationRefConfig:
 
     `checkpoints` lists the files (policy and predictor checkpoints) that must exist before a
     sweep starts, so a missing file fails in the first second instead of in the first trial.
+    `overrides` is merged onto the evaluation config as `grits-lab evaluate --override` merges a
+    file (e.g. {"guidance": {"step": "normalized"}} tunes rho on the normalized guidance step);
+    the trial's rho and s are set on top.
     """
 
     config: str | None = None
     checkpoints: list[str] = field(default_factory=list)
     method: str = "grits"
+    overrides: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -221,8 +225,16 @@ class StudyConfig:
             # the validation block as studies stored it when its root seed was called `root_seed`,
             # so that those studies still resume
             "validation": {"foods": v.foods, "levels": v.levels, "trials": v.trials, "root_seed": v.seed},
-            "evaluator": self.evaluator, "evaluation": self.evaluation,
+            "evaluator": self.evaluator, "evaluation": self._evaluation_identity(),
         })
+
+    def _evaluation_identity(self) -> dict[str, Any]:
+        """The evaluation block as studies stored it before `overrides` existed when it has none,
+        so that those studies still resume."""
+        block = config_to_dict(self.evaluation)
+        if not block["overrides"]:
+            del block["overrides"]
+        return block
 
     def food_library(self) -> "FoodLibrary":
         """The food library the episodes come from: the evaluation config's (`evaluator: grits`), else the packaged one."""
@@ -234,7 +246,7 @@ class StudyConfig:
 
         if not Path(str(self.evaluation.config)).is_file():
             raise InputError(f"evaluation config not found: {self.evaluation.config} (set `evaluation.config` in the sweep file)")
-        return load_foods(load_evaluation_config(str(self.evaluation.config)).sim.foods_file)
+        return load_foods(load_evaluation_config(str(self.evaluation.config), self.evaluation.overrides).sim.foods_file)
 
     def episodes(self) -> list[EpisodeKey]:
         """The validation episodes (ConfigError naming `validation.foods` / `validation.levels` for a

@@ -95,3 +95,36 @@ def test_shipped_sweeps_keep_their_episodes_seeds_and_study_identity(name):
     assert len(rows) == count
     assert hashlib.sha256(json.dumps(rows).encode()).hexdigest()[:16] == digest
     assert config.identity() == identity
+
+
+def test_evaluation_overrides_reach_the_trials_evaluation_config_and_the_study_identity(sweep_file):
+    from grits_lab.tune.grits_binding import GritsEvaluator
+
+    evaluation = {"config": str(REPO / "experiments" / "evaluate_cpu.yaml"), "checkpoints": [], "method": "grits"}
+    plain = load_study_config(sweep_file(evaluator="grits", evaluation=evaluation))
+    normalized = load_study_config(sweep_file(evaluator="grits", evaluation={
+        **evaluation, "overrides": {"guidance": {"step": "normalized"}, "transfer": {"max_joint_step": 0.3}}}))
+    assert GritsEvaluator(plain)._evaluation.guidance.step == "gradient"
+    loaded = GritsEvaluator(normalized)._evaluation
+    assert loaded.guidance.step == "normalized" and loaded.transfer.max_joint_step == 0.3
+    assert loaded.guidance.s == 30 and loaded.foods == GritsEvaluator(plain)._evaluation.foods
+    assert plain.identity() != normalized.identity()  # a study tuned on another step is another study
+
+
+def test_a_bad_evaluation_override_fails_on_load_naming_the_key(sweep_file):
+    path = sweep_file(evaluator="grits", evaluation={
+        "config": str(REPO / "experiments" / "evaluate_cpu.yaml"), "overrides": {"guidance": {"stepp": "normalized"}}})
+    with pytest.raises(ConfigError) as info:
+        load_study_config(path)
+    assert "`guidance.stepp`" in str(info.value) and "\n" not in str(info.value)
+
+
+def test_the_normalized_step_sweep_tunes_rho_on_that_step_from_its_median_paper_step():
+    from grits_lab.evaluation.evaluation_config import load_evaluation_config
+
+    config = load_study_config(REPO / "sweeps" / "grits_cpu_normalized.yaml")
+    assert config.evaluation.overrides == {"guidance": {"step": "normalized"}}
+    assert load_evaluation_config(config.evaluation.config, config.evaluation.overrides).guidance.step == "normalized"
+    assert (config.enqueue[0].rho, config.enqueue[0].s) == (0.07, 30)
+    cpu = load_study_config(REPO / "sweeps" / "grits_cpu.yaml")
+    assert config.episodes() == cpu.episodes()  # the same validation episodes as the gradient-step sweep
