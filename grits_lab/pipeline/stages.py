@@ -126,6 +126,7 @@ def wire(stage: str, data: dict[str, Any], layout: Layout, present: set[str],
         return _executor(data, workers, address)
     if stage == "sweep":
         evaluation = {
+            **data.get("evaluation", {}),  # the sweep file's own keys (its `overrides`) stay
             "config": str(layout.configs / "evaluate.yaml"),
             "checkpoints": [str(policy_checkpoint(layout)), str(predictor_checkpoint(layout, "predictor"))],
             "method": "grits",

@@ -3,7 +3,7 @@
 Everything here is recomputed from the storage, so `grits-lab sweep --report-only` regenerates
 the outputs of a study run by other machines. The best-parameter file, and each Pareto-front
 trial's file under `front/`, hold the trial's `guidance: {rho, s}` on top of the sweep's
-`evaluation.overrides` (less the episode grid), which `grits-lab evaluate` takes as an override:
+`evaluation.overrides`, which `grits-lab evaluate` takes as an override:
 a sweep tuned on the normalized guidance step hands on `step: normalized` with its rho.
 """
 
@@ -24,9 +24,6 @@ from grits_lab.tune.study import (
     ENQUEUED_ATTR, ERROR_ATTR, REQUEUED_ATTR, RETRY_OF_ATTR, WORKER_ATTR,
 )
 
-# Keys of `evaluation.overrides` that choose episodes or outputs, not how GRITS runs: an override file
-# handed to another evaluation leaves them to that evaluation.
-GRID_KEYS = ("run_id", "output_dir", "methods", "foods", "levels", "trials", "seed")
 METRIC_ATTRS = ("success_rate", "spillage_rate", "scoop_failure_rate", "n_episodes", "n_errors")
 
 
@@ -172,9 +169,9 @@ def _rates_line(t: FrozenTrial) -> str:
 
 
 def guidance_override(config: StudyConfig, trial: FrozenTrial) -> dict:
-    """What `trial` ran with, as an evaluation override: the sweep's `evaluation.overrides` less
-    GRID_KEYS, with `guidance.rho` and `guidance.s` set to the trial's."""
-    override = {k: v for k, v in config.evaluation.overrides.items() if k not in GRID_KEYS}
+    """What `trial` ran with, as an evaluation override: the sweep's `evaluation.overrides` (which
+    never hold the episode grid: study_config.NOT_OVERRIDABLE) with the trial's `guidance.rho` and `guidance.s`."""
+    override = dict(config.evaluation.overrides)
     override["guidance"] = {**override.get("guidance", {}), "rho": float(trial.params["rho"]), "s": int(trial.params["s"])}
     return override
 

@@ -134,6 +134,12 @@ class ValidationConfig(EpisodeGrid):
     seed: int = 7000
 
 
+# Evaluation keys a sweep's `evaluation.overrides` may not set: the episode grid (the sweep's
+# `validation` block sets it) and where and how episodes run, which change no result.
+NOT_OVERRIDABLE = ("run_id", "output_dir", "methods", "foods", "levels", "trials", "seed",
+                   "executor", "num_threads", "flush_every", "rollout_chunks")
+
+
 @dataclass(frozen=True)
 class EvaluationRefConfig:
     """Where the real objective gets GRITS from: the evaluation config and the files it needs.
@@ -142,13 +148,23 @@ class EvaluationRefConfig:
     sweep starts, so a missing file fails in the first second instead of in the first trial.
     `overrides` is merged onto the evaluation config as `grits-lab evaluate --override` merges a
     file (e.g. {"guidance": {"step": "normalized"}} tunes rho on the normalized guidance step);
-    the trial's rho and s are set on top.
+    the trial's rho and s are set on top. It may change only how GRITS runs: the keys of
+    NOT_OVERRIDABLE (the episode grid, which `validation` sets; where and how the episodes run)
+    and `guidance.rho` / `guidance.s` (each trial's) fail on load.
     """
 
     config: str | None = None
     checkpoints: list[str] = field(default_factory=list)
     method: str = "grits"
     overrides: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        wrong = sorted(set(self.overrides) & set(NOT_OVERRIDABLE))
+        require(not wrong, "evaluation.overrides", wrong,
+                "free of the episode grid and run settings (" + ", ".join(NOT_OVERRIDABLE) + "): `validation` sets the episodes")
+        guidance = self.overrides.get("guidance") or {}
+        require(isinstance(guidance, dict) and not {"rho", "s"} & set(guidance), "evaluation.overrides.guidance", guidance,
+                "free of `rho` and `s`: each trial sets them")
 
 
 @dataclass(frozen=True)

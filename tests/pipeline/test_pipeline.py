@@ -80,3 +80,19 @@ def test_cli_rejects_unknown_stage_selection(tmp_path, demos_file, capsys):
     })
     assert main(["pipeline", str(pipeline), "--only", "policy"]) == 2
     assert "unknown stage `policy`" in capsys.readouterr().err
+
+
+def test_the_sweep_stage_keeps_the_sweep_files_evaluation_overrides(tmp_path):
+    from grits_lab.pipeline.pipeline_run import stage_config_text
+    from grits_lab.pipeline.stages import Layout
+
+    data = yaml.safe_load(open("experiments/paper.yaml"))
+    data["output_dir"] = str(tmp_path / "paper")
+    data["stages"]["sweep"] = {"config": "sweeps/grits_cpu_normalized.yaml"}
+    config = load_pipeline_config(_write(tmp_path / "p.yaml", data))
+    layout = Layout(tmp_path / "paper")
+    wired = yaml.safe_load(stage_config_text("sweep", config, layout))
+    evaluation = wired["evaluation"]
+    assert evaluation["overrides"] == {"guidance": {"step": "normalized"}}  # rho is tuned on the step the file names
+    assert evaluation["config"] == str(layout.configs / "evaluate.yaml")  # the pipeline's own links win
+    assert all(str(tmp_path) in path for path in evaluation["checkpoints"])

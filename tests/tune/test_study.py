@@ -141,22 +141,25 @@ def test_outputs_best_yaml_is_a_guidance_override(sweep_file, tmp_path):
     assert summary["defaults"]["trial"] == 0 and summary["best"]["n_episodes"] == 8
 
 
-def test_override_files_carry_the_sweeps_evaluation_overrides_less_the_episode_grid(sweep_file, tmp_path):
+def test_override_files_carry_the_sweeps_evaluation_overrides_with_the_trials_rho_and_s(sweep_file, tmp_path):
     from grits_lab.evaluation.evaluation_config import load_evaluation_config
 
-    overrides = {"guidance": {"step": "normalized", "rho": 9.0}, "transfer": {"max_joint_step": 0.3},
-                 "foods": ["soybeans"], "trials": 1, "seed": 5}
+    overrides = {"guidance": {"step": "normalized"}, "transfer": {"max_joint_step": 0.3}}
     config = load_study_config(sweep_file(n_trials=4, objective={"mode": "multi"}, evaluation={"overrides": overrides}))
     study, _ = run_study(config, tmp_path / "j.log")
-    write_outputs(study, config, tmp_path / "out", "j.log", "synthetic", plots=False)
-    best = yaml.safe_load((tmp_path / "out" / "best.yaml").read_text())
-    trials = pd.read_parquet(tmp_path / "out" / "trials.parquet").set_index("number")
-    rho, s = best["guidance"]["rho"], best["guidance"]["s"]
-    assert best == {"guidance": {"step": "normalized", "rho": rho, "s": s}, "transfer": {"max_joint_step": 0.3}}
-    assert ((trials["rho"] - rho).abs() < 1e-12).any() and rho != 9.0  # the trial's rho, not the override's
-    protocol = load_evaluation_config(REPO / "experiments" / "evaluate_cpu.yaml", best)
-    assert (protocol.guidance.step, protocol.guidance.rho, protocol.guidance.s) == ("normalized", rho, s)
-    assert protocol.trials == 5 and protocol.seed == 0  # the protocol's episodes, not the sweep's
+    out = tmp_path / "out"
+    write_outputs(study, config, out, "j.log", "synthetic", plots=False)
+    trials = pd.read_parquet(out / "trials.parquet").set_index("number")
+    files = [out / "best.yaml", *sorted((out / "front").glob("trial_*.yaml"))]
+    assert len(files) >= 2
+    for path in files:
+        override = yaml.safe_load(path.read_text())
+        rho, s = override["guidance"]["rho"], override["guidance"]["s"]
+        assert override == {"guidance": {"step": "normalized", "rho": rho, "s": s}, "transfer": {"max_joint_step": 0.3}}
+        assert (((trials["rho"] - rho).abs() < 1e-12) & (trials["s"] == s)).any()  # one trial's own rho and s
+        protocol = load_evaluation_config(REPO / "experiments" / "evaluate_cpu.yaml", override)
+        assert (protocol.guidance.step, protocol.guidance.rho, protocol.guidance.s) == ("normalized", rho, s)
+        assert protocol.trials == 5 and protocol.seed == 0  # the protocol's episodes, not the sweep's
 
 
 def test_outputs_hold_one_override_per_pareto_front_trial(sweep_file, tmp_path):

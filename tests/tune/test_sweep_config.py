@@ -78,6 +78,7 @@ def test_the_validation_block_is_checked_by_the_evaluations_episode_grid(sweep_f
 # became an episode grid: its episodes, their seeds and existing studies must not change.
 SHIPPED_EPISODES = {
     "grits_cpu": (20, "5d2806b57e171b49", "25d72b44589cfd3d"),
+    "grits_cpu_normalized": (20, "5d2806b57e171b49", "a2531b9be33b233d"),
     "grits_paper": (50, "48430c570614e2a0", "33355baaa34cf9b4"),
     "grits_quick": (12, "1c0af4685854e532", "db395eec8b9a3536"),
     "synthetic_standin": (24, "b9291626d2bf9833", "2d9396727413733a"),
@@ -97,18 +98,33 @@ def test_shipped_sweeps_keep_their_episodes_seeds_and_study_identity(name):
     assert config.identity() == identity
 
 
-def test_evaluation_overrides_reach_the_trials_evaluation_config_and_the_study_identity(sweep_file):
-    from grits_lab.tune.grits_binding import GritsEvaluator
+def test_evaluation_overrides_reach_the_trials_evaluation_config_and_the_study_identity(sweep_file, monkeypatch):
+    from grits_lab.tune import grits_binding
 
+    # the checkpoint and cluster checks need trained models; what is checked here is the config
+    monkeypatch.setattr(grits_binding, "_check_against_evaluation", lambda evaluation, method: None)
     evaluation = {"config": str(REPO / "experiments" / "evaluate_cpu.yaml"), "checkpoints": [], "method": "grits"}
     plain = load_study_config(sweep_file(evaluator="grits", evaluation=evaluation))
     normalized = load_study_config(sweep_file(evaluator="grits", evaluation={
         **evaluation, "overrides": {"guidance": {"step": "normalized"}, "transfer": {"max_joint_step": 0.3}}}))
-    assert GritsEvaluator(plain)._evaluation.guidance.step == "gradient"
-    loaded = GritsEvaluator(normalized)._evaluation
-    assert loaded.guidance.step == "normalized" and loaded.transfer.max_joint_step == 0.3
-    assert loaded.guidance.s == 30 and loaded.foods == GritsEvaluator(plain)._evaluation.foods
+    base = grits_binding.GritsEvaluator(plain)._evaluation
+    loaded = grits_binding.GritsEvaluator(normalized)._evaluation
+    assert (base.guidance.step, base.transfer.max_joint_step) == ("gradient", 0.5)
+    assert (loaded.guidance.step, loaded.transfer.max_joint_step) == ("normalized", 0.3)
+    assert loaded.guidance.gradient == base.guidance.gradient and loaded.foods == base.foods  # the rest is the file's
     assert plain.identity() != normalized.identity()  # a study tuned on another step is another study
+
+
+@pytest.mark.parametrize("overrides, key", [
+    ({"foods": ["penne"]}, "evaluation.overrides"),
+    ({"executor": {"workers": 4}}, "evaluation.overrides"),
+    ({"guidance": {"rho": 1.0}}, "evaluation.overrides.guidance"),
+    ({"guidance": {"step": "normalized", "s": 30}}, "evaluation.overrides.guidance"),
+])
+def test_overrides_of_the_episodes_run_settings_or_the_tuned_parameters_are_refused(sweep_file, overrides, key):
+    with pytest.raises(ConfigError) as info:
+        load_study_config(sweep_file(evaluation={"overrides": overrides}))
+    assert f"`{key}`" in str(info.value) and "\n" not in str(info.value)
 
 
 def test_a_bad_evaluation_override_fails_on_load_naming_the_key(sweep_file):
