@@ -176,7 +176,7 @@ def guidance_override(config: StudyConfig, trial: FrozenTrial) -> dict:
     return override
 
 
-def _guidance_override(config: StudyConfig, header: list[str], trial: FrozenTrial) -> str:
+def _override_file(config: StudyConfig, header: list[str], trial: FrozenTrial) -> str:
     """`# header` lines and how to use the file, then `guidance_override`: for `grits-lab evaluate --override`."""
     usage = "# Pass it to `grits-lab evaluate` as an override of the evaluation config."
     body = yaml.safe_dump(guidance_override(config, trial), sort_keys=False)
@@ -191,7 +191,7 @@ def _write_front(config: StudyConfig, front: list[FrozenTrial], folder: Path, la
         keep.add(name)
         header = [f"# Pareto-front trial {t.number} of sweep `{config.study_name}` (maximize success, minimize spillage).",
                   f"# Evaluator: {label}.", f"# This trial: {_rates_line(t)}."]
-        write_text_atomic(folder / name, _guidance_override(config, header, t))
+        write_text_atomic(folder / name, _override_file(config, header, t))
     if folder.is_dir():
         for stale in folder.glob("trial_*.yaml"):
             if stale.name not in keep:
@@ -207,7 +207,7 @@ def _best_yaml(config: StudyConfig, best: FrozenTrial, defaults: FrozenTrial | N
     if defaults is not None:
         header.append(f"# First enqueued point rho={defaults.params['rho']:g} s={defaults.params['s']} "
                       f"(trial {defaults.number}): {_rates_line(defaults)}.")
-    return _guidance_override(config, header, best)
+    return _override_file(config, header, best)
 
 
 def plot_tradeoff(study: optuna.Study, config: StudyConfig, path: Path, label: str) -> str:

@@ -83,10 +83,11 @@ def test_cli_rejects_unknown_stage_selection(tmp_path, demos_file, capsys):
 
 
 def test_the_sweep_stage_keeps_the_sweep_files_evaluation_overrides(tmp_path):
+    from grits_lab.config import load_yaml
     from grits_lab.pipeline.pipeline_run import stage_config_text
     from grits_lab.pipeline.stages import Layout
 
-    data = yaml.safe_load(open("experiments/paper.yaml"))
+    data = load_yaml("experiments/paper.yaml")
     data["output_dir"] = str(tmp_path / "paper")
     data["stages"]["sweep"] = {"config": "sweeps/grits_cpu_normalized.yaml"}
     config = load_pipeline_config(_write(tmp_path / "p.yaml", data))
