@@ -22,7 +22,7 @@ import yaml
 from grits_lab.config import load_yaml, merge_mappings
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
 from grits_lab.pipeline.pipeline_config import UPSTREAM, PipelineConfig
-from grits_lab.pipeline.stages import Layout, run, wire
+from grits_lab.pipeline.stages import Layout, check, run, wire
 
 STATE_FILE = "pipeline_state.json"
 
@@ -54,15 +54,24 @@ def load_state(root: Path) -> dict[str, Any]:
 
 def run_pipeline(config: PipelineConfig, only: list[str] | None = None, force: list[str] | None = None,
                  progress: bool = True) -> dict[str, Any]:
-    """Run (or resume) every configured stage; returns {stage: {status, seconds, fingerprint, summary}}."""
-    layout = Layout(ensure_writable_dir(config.output_dir))
+    """Run (or resume) every configured stage; returns {stage: {status, seconds, fingerprint, summary}}.
+
+    Every selected stage's wired config is parsed first (stages.check), so a bad key or food name
+    in any stage raises ConfigError / InputError naming the stage before the first stage runs.
+    """
+    layout = Layout(Path(config.output_dir))
+    stages = config.ordered_stages()
+    texts = {stage: stage_config_text(stage, config, layout) for stage in stages}
+    for stage in stages:  # a typo in the last stage's overrides fails now, not after the stages before it
+        if not only or stage in only:
+            check(stage, texts[stage])
+    ensure_writable_dir(layout.root)
     ensure_writable_dir(layout.configs)
     state = load_state(layout.root)
     fingerprints: dict[str, str] = {}
     results: dict[str, Any] = {}
-    stages = config.ordered_stages()
     for index, stage in enumerate(stages, start=1):
-        text = stage_config_text(stage, config, layout)
+        text = texts[stage]
         upstream = [fingerprints[s] for s in UPSTREAM.get(stage, ()) if s in fingerprints]
         fp = fingerprint(text, upstream)
         fingerprints[stage] = fp

@@ -9,12 +9,14 @@ would get from `grits-lab collect/train/evaluate/sweep/report` with that file.
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from grits_lab.config import merge_mappings
+from grits_lab.errors import ConfigError, InputError
 
 
 @dataclass(frozen=True)
@@ -137,37 +139,112 @@ def wire(stage: str, data: dict[str, Any], layout: Layout, present: set[str],
     raise ValueError(f"unknown stage {stage}")
 
 
+def _kind(stage: str) -> str:
+    return stage.split("_")[0] if stage.startswith("predictor") else stage
+
+
+def load_stage(stage: str, config_path: Path) -> Any:
+    """Parse a wired stage file with its command's loader and check what needs no upstream output.
+
+    Keys and values, and for demos and evaluate the food and level names; nothing is written.
+    Raises ConfigError or InputError with the loader's one-line message.
+    """
+    return _LOADERS[_kind(stage)](config_path)
+
+
+def check(stage: str, text: str) -> None:
+    """Check a stage's wired YAML before the pipeline runs anything; the error names the stage."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / f"{stage}.yaml"
+        path.write_text(text)
+        try:
+            load_stage(stage, path)
+        except (ConfigError, InputError) as exc:
+            raise type(exc)(f"stage `{stage}`: {str(exc).replace(f'{path}: ', '')}") from None
+
+
 def run(stage: str, config_path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
     """Run one wired stage; returns a JSON-serializable summary."""
-    return _RUNNERS[stage.split("_")[0] if stage.startswith("predictor") else stage](stage, config_path, layout, progress)
+    return _RUNNERS[_kind(stage)](stage, load_stage(stage, config_path), layout, progress)
 
 
-def _run_collect(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
-    from grits_lab.collection.jobs import load_collect_config, run_collection
+def _load_collect(path: Path) -> Any:
+    from grits_lab.collection.demos import plan_demos
+    from grits_lab.collection.jobs import load_collect_config
 
-    return run_collection(load_collect_config(path), progress=progress)
-
-
-def _run_policy(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
-    from grits_lab.evaluation.rollouts import ScoopRollouts
-    from grits_lab.policies.diffusion.training_diffusion import load_train_config, train_policy
-
-    return train_policy(load_train_config(path), progress=progress, rollouts=ScoopRollouts)
+    config = load_collect_config(path)
+    if config.kind == "demos":
+        plan_demos(config)  # food and level names
+    return config
 
 
-def _run_bc(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
-    from grits_lab.policies.bc.training_bc import load_bc_config, train_bc
+def _load_policy(path: Path) -> Any:
+    from grits_lab.policies.diffusion.training_diffusion import load_train_config
 
-    return train_bc(load_bc_config(path), progress=progress)
+    return load_train_config(path)
 
 
-def _run_predictor(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
+def _load_bc(path: Path) -> Any:
+    from grits_lab.policies.bc.training_bc import load_bc_config
+
+    return load_bc_config(path)
+
+
+def _load_predictor(path: Path) -> Any:
     from grits_lab.config import load_config
-    from grits_lab.spillage.predictor_checkpoint import load_predictor
     from grits_lab.spillage.predictor_config import PredictorConfig
+
+    return load_config(path, PredictorConfig)
+
+
+def _load_evaluate(path: Path) -> Any:
+    from grits_lab.evaluation.evaluation_config import load_evaluation_config
+    from grits_lab.evaluation.evaluation_run import episode_keys
+
+    config = load_evaluation_config(path)
+    episode_keys(config)  # food and level names
+    return config
+
+
+def _load_sweep(path: Path) -> Any:
+    from grits_lab.config import load_config
+    from grits_lab.tune.study_config import StudyConfig
+
+    # its validation episodes are checked when it runs: they read the evaluate stage's wired file
+    load_config(path, StudyConfig)
+    return path
+
+
+def _load_report(path: Path) -> Any:
+    from grits_lab.config import load_yaml
+
+    return load_yaml(path)
+
+
+def _run_collect(stage: str, config: Any, layout: Layout, progress: bool) -> dict[str, Any]:
+    from grits_lab.collection.jobs import run_collection
+
+    return run_collection(config, progress=progress)
+
+
+def _run_policy(stage: str, config: Any, layout: Layout, progress: bool) -> dict[str, Any]:
+    from grits_lab.evaluation.rollouts import ScoopRollouts
+    from grits_lab.policies.diffusion.training_diffusion import train_policy
+
+    return train_policy(config, progress=progress, rollouts=ScoopRollouts)
+
+
+def _run_bc(stage: str, config: Any, layout: Layout, progress: bool) -> dict[str, Any]:
+    from grits_lab.policies.bc.training_bc import train_bc
+
+    return train_bc(config, progress=progress)
+
+
+def _run_predictor(stage: str, config: Any, layout: Layout, progress: bool) -> dict[str, Any]:
+    from grits_lab.spillage.predictor_checkpoint import load_predictor
     from grits_lab.spillage.predictor_training import evaluate_predictor, train_predictor
 
-    summary = train_predictor(load_config(path, PredictorConfig), progress=progress)
+    summary = train_predictor(config, progress=progress)
     heldout = layout.dataset("spillage_heldout")
     if (heldout / "index.parquet").exists() or (heldout / "episodes").is_dir():
         predictor = load_predictor(predictor_checkpoint(layout, stage))
@@ -175,32 +252,41 @@ def _run_predictor(stage: str, path: Path, layout: Layout, progress: bool) -> di
     return summary
 
 
-def _run_evaluate(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
-    from grits_lab.evaluation.evaluation_config import load_evaluation_config
+def _run_evaluate(stage: str, config: Any, layout: Layout, progress: bool) -> dict[str, Any]:
     from grits_lab.evaluation.evaluation_run import evaluate, summary_table
 
-    records = evaluate(load_evaluation_config(path), progress=progress)
+    records = evaluate(config, progress=progress)
     print(summary_table(records))
     return {"episodes": len(records)}
 
 
 def _run_sweep(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
-    from grits_lab.tune.study_config import load_study_config
     from grits_lab.tune.job import run_sweep
+    from grits_lab.tune.study_config import load_study_config
 
     return run_sweep(load_study_config(path), progress=progress)
 
 
-def _run_report(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
-    from grits_lab.config import load_yaml
+def _run_report(stage: str, data: Any, layout: Layout, progress: bool) -> dict[str, Any]:
     from grits_lab.report.build import build_report
 
-    data = load_yaml(path)
     result = build_report(data["run_dir"], data["output_dir"])
     return {"output_dir": str(result.out_dir), "files": len(result.files), "missing": list(result.missing)}
 
 
-_RUNNERS: dict[str, Callable[[str, Path, Layout, bool], dict[str, Any]]] = {
+_LOADERS: dict[str, Callable[[Path], Any]] = {
+    "demos": _load_collect,
+    "spillage": _load_collect,
+    "spillage_heldout": _load_collect,
+    "policy": _load_policy,
+    "bc": _load_bc,
+    "predictor": _load_predictor,
+    "evaluate": _load_evaluate,
+    "sweep": _load_sweep,
+    "report": _load_report,
+}
+
+_RUNNERS: dict[str, Callable[[str, Any, Layout, bool], dict[str, Any]]] = {
     "demos": _run_collect,
     "spillage": _run_collect,
     "spillage_heldout": _run_collect,

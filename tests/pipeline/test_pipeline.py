@@ -97,3 +97,34 @@ def test_the_sweep_stage_keeps_the_sweep_files_evaluation_overrides(tmp_path):
     assert evaluation["overrides"] == {"guidance": {"step": "normalized"}}  # rho is tuned on the step the file names
     assert evaluation["config"] == str(layout.configs / "evaluate.yaml")  # the pipeline's own links win
     assert all(str(tmp_path) in path for path in evaluation["checkpoints"])
+
+
+@pytest.mark.parametrize("stage, overrides, fragment", [
+    ("policy", {"policy": {"unet": {"down_dimz": [32, 64]}}}, "stage `policy`: unknown key `policy.unet.down_dimz`"),
+    ("evaluate", {"foods": ["sagoo"]}, "stage `evaluate`: `foods` names 'sagoo'"),
+])
+def test_a_bad_key_in_a_later_stage_fails_before_the_first_stage_runs(tmp_path, demos_file, capsys, stage, overrides, fragment):
+    config_file = {"policy": "experiments/policy_cpu.yaml", "evaluate": "experiments/evaluate_quick.yaml"}[stage]
+    out = tmp_path / "run"
+    stages = {"demos": {"config": str(demos_file)}, "policy": {"config": "experiments/policy_cpu.yaml"}}
+    if stage == "evaluate":
+        stages["evaluate"] = {"config": config_file}
+    stages[stage]["overrides"] = overrides
+    pipeline = _write(tmp_path / "pipeline.yaml", {"name": "tiny", "output_dir": str(out), "stages": stages})
+    assert main(["pipeline", str(pipeline), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert fragment in err[-1] and len([line for line in err if "error" in line]) == 1
+    assert not out.exists()  # nothing was written, the demos stage never started
+
+
+def test_the_shipped_pipelines_stage_configs_pass_the_check(tmp_path):
+    from grits_lab.config import load_yaml
+    from grits_lab.pipeline.pipeline_run import stage_config_text
+    from grits_lab.pipeline.stages import Layout, check
+
+    for name in ("experiments/quickstart.yaml", "experiments/study_cpu.yaml", "experiments/paper.yaml"):
+        data = load_yaml(name)
+        data["output_dir"] = str(tmp_path / "out")
+        config = load_pipeline_config(_write(tmp_path / "p.yaml", data))
+        for stage in config.ordered_stages():
+            check(stage, stage_config_text(stage, config, Layout(tmp_path / "out")))
