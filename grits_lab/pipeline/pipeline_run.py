@@ -64,7 +64,7 @@ def run_pipeline(config: PipelineConfig, only: list[str] | None = None, force: l
     texts = {stage: stage_config_text(stage, config, layout) for stage in stages}
     for stage in stages:  # a typo in the last stage's overrides fails now, not after the stages before it
         if not only or stage in only:
-            check(stage, texts[stage])
+            check(stage, texts, config.stages[stage].config)
     ensure_writable_dir(layout.root)
     ensure_writable_dir(layout.configs)
     state = load_state(layout.root)

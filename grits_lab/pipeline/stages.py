@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from grits_lab.config import merge_mappings
 from grits_lab.errors import ConfigError, InputError
 
@@ -152,15 +154,31 @@ def load_stage(stage: str, config_path: Path) -> Any:
     return _LOADERS[_kind(stage)](config_path)
 
 
-def check(stage: str, text: str) -> None:
-    """Check a stage's wired YAML before the pipeline runs anything; the error names the stage."""
+def check(stage: str, texts: dict[str, str], source: str | None = None) -> None:
+    """Check a stage's wired YAML (`texts[stage]`) before the pipeline runs anything.
+
+    `texts` maps every configured stage to its wired YAML; the sweep stage's validation episodes
+    and evaluation overrides are checked against the evaluate stage's. `source` is the stage's
+    config file, named in the error with the stage. Raises ConfigError or InputError.
+    """
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"{stage}.yaml"
-        path.write_text(text)
+        data = yaml.safe_load(texts[stage])
+        if _kind(stage) == "sweep" and "evaluate" in texts:
+            evaluate_path = Path(tmp) / "evaluate.yaml"
+            evaluate_path.write_text(texts["evaluate"])
+            data["evaluation"] = {**data.get("evaluation", {}), "config": str(evaluate_path)}
+        path.write_text(yaml.safe_dump(data, sort_keys=False))
         try:
-            load_stage(stage, path)
+            config = load_stage(stage, path)
+            if _kind(stage) == "sweep" and "evaluate" in texts:
+                from grits_lab.tune.study_config import load_study_config
+
+                load_study_config(config)
         except (ConfigError, InputError) as exc:
-            raise type(exc)(f"stage `{stage}`: {str(exc).replace(f'{path}: ', '')}") from None
+            where = f"stage `{stage}`" + (f" ({source} with its overrides)" if source else "")
+            message = str(exc).replace(f"{tmp}/evaluate.yaml: ", "the evaluate stage's config with `evaluation.overrides`: ")
+            raise type(exc)(f"{where}: {message.replace(f'{tmp}/', '').replace(f'{stage}.yaml: ', '')}") from None
 
 
 def run(stage: str, config_path: Path, layout: Layout, progress: bool) -> dict[str, Any]:

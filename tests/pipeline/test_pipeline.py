@@ -100,21 +100,24 @@ def test_the_sweep_stage_keeps_the_sweep_files_evaluation_overrides(tmp_path):
 
 
 @pytest.mark.parametrize("stage, overrides, fragment", [
-    ("policy", {"policy": {"unet": {"down_dimz": [32, 64]}}}, "stage `policy`: unknown key `policy.unet.down_dimz`"),
-    ("evaluate", {"foods": ["sagoo"]}, "stage `evaluate`: `foods` names 'sagoo'"),
+    ("policy", {"policy": {"unet": {"down_dimz": [32, 64]}}},
+     "stage `policy` (experiments/policy_paper.yaml with its overrides): unknown key `policy.unet.down_dimz`"),
+    ("evaluate", {"foods": ["sagoo"]}, "stage `evaluate` (experiments/evaluate.yaml with its overrides): `foods` names 'sagoo'"),
+    ("sweep", {"validation": {"foods": ["sagoo"]}}, "`validation.foods` names 'sagoo'"),
+    ("sweep", {"evaluation": {"overrides": {"guidance": {"stepp": "normalized"}}}}, "guidance.stepp"),
 ])
-def test_a_bad_key_in_a_later_stage_fails_before_the_first_stage_runs(tmp_path, demos_file, capsys, stage, overrides, fragment):
-    config_file = {"policy": "experiments/policy_cpu.yaml", "evaluate": "experiments/evaluate_quick.yaml"}[stage]
+def test_a_bad_key_in_a_later_stage_fails_before_the_first_stage_runs(tmp_path, capsys, stage, overrides, fragment):
+    from grits_lab.config import load_yaml
+
+    data = load_yaml("experiments/paper.yaml")
     out = tmp_path / "run"
-    stages = {"demos": {"config": str(demos_file)}, "policy": {"config": "experiments/policy_cpu.yaml"}}
-    if stage == "evaluate":
-        stages["evaluate"] = {"config": config_file}
-    stages[stage]["overrides"] = overrides
-    pipeline = _write(tmp_path / "pipeline.yaml", {"name": "tiny", "output_dir": str(out), "stages": stages})
+    data["output_dir"] = str(out)
+    data["stages"][stage]["overrides"] = {**data["stages"][stage].get("overrides", {}), **overrides}
+    pipeline = _write(tmp_path / "pipeline.yaml", data)
     assert main(["pipeline", str(pipeline), "--no-progress"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert fragment in err[-1] and len([line for line in err if "error" in line]) == 1
-    assert not out.exists()  # nothing was written, the demos stage never started
+    err = [line for line in capsys.readouterr().err.strip().splitlines() if "error" in line]
+    assert len(err) == 1 and fragment in err[0] and str(tmp_path) not in err[0].replace(str(pipeline), "")
+    assert not out.exists()  # nothing was written, the first stage never started
 
 
 def test_the_shipped_pipelines_stage_configs_pass_the_check(tmp_path):
@@ -126,5 +129,6 @@ def test_the_shipped_pipelines_stage_configs_pass_the_check(tmp_path):
         data = load_yaml(name)
         data["output_dir"] = str(tmp_path / "out")
         config = load_pipeline_config(_write(tmp_path / "p.yaml", data))
-        for stage in config.ordered_stages():
-            check(stage, stage_config_text(stage, config, Layout(tmp_path / "out")))
+        texts = {stage: stage_config_text(stage, config, Layout(tmp_path / "out")) for stage in config.ordered_stages()}
+        for stage in texts:
+            check(stage, texts, config.stages[stage].config)
