@@ -162,19 +162,17 @@ def check(stage: str, texts: dict[str, str], source: str | None = None) -> None:
     config file, named in the error with the stage. Raises ConfigError or InputError.
     """
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / f"{stage}.yaml"
-        data = yaml.safe_load(texts[stage])
-        if _kind(stage) == "sweep" and "evaluate" in texts:
+        text = texts[stage]
+        if stage == "sweep" and "evaluate" in texts:  # its validation episodes read the evaluate stage's config
             evaluate_path = Path(tmp) / "evaluate.yaml"
             evaluate_path.write_text(texts["evaluate"])
+            data = yaml.safe_load(text)
             data["evaluation"] = {**data.get("evaluation", {}), "config": str(evaluate_path)}
-        path.write_text(yaml.safe_dump(data, sort_keys=False))
+            text = yaml.safe_dump(data, sort_keys=False)
+        path = Path(tmp) / f"{stage}.yaml"
+        path.write_text(text)
         try:
-            config = load_stage(stage, path)
-            if _kind(stage) == "sweep" and "evaluate" in texts:
-                from grits_lab.tune.study_config import load_study_config
-
-                load_study_config(config)
+            load_stage(stage, path)
         except (ConfigError, InputError) as exc:
             where = f"stage `{stage}`" + (f" ({source} with its overrides)" if source else "")
             message = str(exc).replace(f"{tmp}/evaluate.yaml: ", "the evaluate stage's config with `evaluation.overrides`: ")
@@ -225,12 +223,9 @@ def _load_evaluate(path: Path) -> Any:
 
 
 def _load_sweep(path: Path) -> Any:
-    from grits_lab.config import load_config
-    from grits_lab.tune.study_config import StudyConfig
+    from grits_lab.tune.study_config import load_study_config
 
-    # its validation episodes are checked when it runs: they read the evaluate stage's wired file
-    load_config(path, StudyConfig)
-    return path
+    return load_study_config(path)  # its validation episodes too, named against its evaluation config
 
 
 def _load_report(path: Path) -> Any:
@@ -278,11 +273,10 @@ def _run_evaluate(stage: str, config: Any, layout: Layout, progress: bool) -> di
     return {"episodes": len(records)}
 
 
-def _run_sweep(stage: str, path: Path, layout: Layout, progress: bool) -> dict[str, Any]:
+def _run_sweep(stage: str, config: Any, layout: Layout, progress: bool) -> dict[str, Any]:
     from grits_lab.tune.job import run_sweep
-    from grits_lab.tune.study_config import load_study_config
 
-    return run_sweep(load_study_config(path), progress=progress)
+    return run_sweep(config, progress=progress)
 
 
 def _run_report(stage: str, data: Any, layout: Layout, progress: bool) -> dict[str, Any]:
