@@ -40,3 +40,29 @@ def full_disk(monkeypatch):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
     monkeypatch.setattr(os, "fsync", fsync)
+
+
+class _RunsCode:
+    """Unpickling this calls `touch marker`: a checkpoint entry that runs a shell command."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (os.system, (f"touch {self.marker}",))
+
+
+@pytest.fixture
+def plant_pickle(tmp_path):
+    """plant(good, planted) re-saves checkpoint `good` as `planted` with one extra entry whose
+    `__reduce__` creates a marker file; returns the marker's path (it must never exist)."""
+    import torch
+
+    def plant(good, planted):
+        marker = tmp_path / f"ran-{os.path.basename(str(planted))}"
+        state = torch.load(good, weights_only=True)
+        state["extra"] = _RunsCode(marker)
+        torch.save(state, planted)
+        return marker
+
+    return plant

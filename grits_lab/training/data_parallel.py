@@ -88,7 +88,7 @@ def run_processes(fn: Callable[..., Any], world_size: int, args: Sequence[Any], 
     try:
         mp.start_processes(_entry, args=(world_size, str(token), errors_queue, fn, tuple(args)), nprocs=world_size,
                            join=True, start_method="spawn")
-        return torch.load(result_file, weights_only=False)
+        return torch.load(result_file, weights_only=True)  # rank 0's summary: plain data, and the folder may be shared
     except ProcessException:
         if not errors_queue.empty():
             name, message = errors_queue.get()

@@ -41,3 +41,20 @@ def test_a_level_no_food_has_is_refused_by_name(models, tmp_path):
     with pytest.raises(ConfigError, match=r"`levels` names 'medum'"):
         evaluate(config, progress=False)
     assert not (tmp_path / "run").exists()
+
+
+def test_a_planted_policy_checkpoint_is_refused_in_one_line_before_the_run_and_never_runs(models, tmp_path, plant_pickle, capsys):
+    import yaml
+
+    from grits_lab.cli import main
+    from grits_lab.config import config_to_dict
+
+    planted = tmp_path / "policy.pt"
+    marker = plant_pickle(models["policy"], planted)
+    config = eval_config(models, tmp_path / "run", methods=["dp"], checkpoints={"policy": str(planted)})
+    path = tmp_path / "evaluate.yaml"
+    path.write_text(yaml.safe_dump(config_to_dict(config)))
+    assert main(["evaluate", str(path), "--serial", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"refused checkpoint {planted}" in err[0]
+    assert not marker.exists() and not (tmp_path / "run").exists()

@@ -23,8 +23,8 @@ def test_bc_shares_the_loop_resume_included(demo_dataset, tmp_path):
     train_bc(bc_config(tmp_path / "b"), max_steps=10, progress=False)
     resumed = train_bc(bc_config(tmp_path / "b"), progress=False)
     assert resumed["resumed_from"] == 10 and straight["final_train_loss"] < straight["first_loss"]
-    sa = torch.load(straight["checkpoint"], weights_only=False)
-    sb = torch.load(resumed["checkpoint"], weights_only=False)
+    sa = torch.load(straight["checkpoint"], weights_only=True)
+    sb = torch.load(resumed["checkpoint"], weights_only=True)
     assert sa["ema"] is None  # BC is judged by its own weights
     for key, value in sa["policy"]["model"].items():
         torch.testing.assert_close(sb["policy"]["model"][key], value, rtol=1e-5, atol=1e-6)

@@ -63,8 +63,8 @@ def test_two_process_training_resumes_to_the_weights_of_an_uninterrupted_run(dem
     train_policy(_train_config(demo_dataset, tmp_path / "b", num_processes=2), max_steps=10, progress=False)
     resumed = train_policy(_train_config(demo_dataset, tmp_path / "b", num_processes=2), progress=False)
     assert resumed["resumed_from"] == 10 and resumed["steps"] == 20
-    sa = torch.load(straight["checkpoint"], weights_only=False)
-    sb = torch.load(resumed["checkpoint"], weights_only=False)
+    sa = torch.load(straight["checkpoint"], weights_only=True)
+    sb = torch.load(resumed["checkpoint"], weights_only=True)
     assert len(sb["torch_rng_processes"]) == 2
     for key, value in sa["policy"]["model"].items():
         torch.testing.assert_close(sb["policy"]["model"][key], value, rtol=1e-5, atol=1e-6)
@@ -102,11 +102,11 @@ def test_a_checkpoint_from_before_data_parallel_training_resumes_exactly(demo_da
     straight = train_policy(_train_config(demo_dataset, tmp_path / "a"), progress=False)
     train_policy(_train_config(demo_dataset, tmp_path / "b"), max_steps=10, progress=False)
     last = tmp_path / "b" / "checkpoints" / "last.pt"
-    old = torch.load(last, weights_only=False)
+    old = torch.load(last, weights_only=True)
     old["torch_rng"] = old.pop("torch_rng_processes")[0]  # the single generator state older checkpoints kept
     torch.save(old, last)
     resumed = train_policy(_train_config(demo_dataset, tmp_path / "b"), progress=False)
-    sa = torch.load(straight["checkpoint"], weights_only=False)
-    sb = torch.load(resumed["checkpoint"], weights_only=False)
+    sa = torch.load(straight["checkpoint"], weights_only=True)
+    sb = torch.load(resumed["checkpoint"], weights_only=True)
     for key, value in sa["policy"]["model"].items():
         torch.testing.assert_close(sb["policy"]["model"][key], value, rtol=1e-5, atol=1e-6)

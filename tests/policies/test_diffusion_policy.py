@@ -117,8 +117,8 @@ def test_resume_continues_to_the_same_weights(demo_dataset, tmp_path):
     train_policy(_train_config(demo_dataset, tmp_path / "b"), max_steps=10, progress=False)
     resumed = train_policy(_train_config(demo_dataset, tmp_path / "b"), progress=False)
     assert resumed["resumed_from"] == 10 and resumed["steps"] == 20
-    sa = torch.load(straight["checkpoint"], weights_only=False)
-    sb = torch.load(resumed["checkpoint"], weights_only=False)
+    sa = torch.load(straight["checkpoint"], weights_only=True)
+    sb = torch.load(resumed["checkpoint"], weights_only=True)
     for key, value in sa["policy"]["model"].items():
         torch.testing.assert_close(sb["policy"]["model"][key], value, rtol=1e-5, atol=1e-6)
     log = pd.read_csv(tmp_path / "b" / "metrics.csv")
@@ -202,3 +202,12 @@ def test_other_encoders_learn_from_their_observation(kind):
     single = {k: v[0].numpy() for k, v in batch.items() if k != "action"}
     assert policy.predict_action(single).shape == (12, 9)
 
+
+
+def test_a_planted_pickle_as_last_pt_is_refused_on_resume_and_never_runs(demo_dataset, tmp_path, plant_pickle):
+    config = _train_config(demo_dataset, tmp_path / "run")
+    last = train_policy(config, max_steps=5, progress=False)["checkpoint"]
+    marker = plant_pickle(last, last)
+    with pytest.raises(InputError, match=f"refused checkpoint {last}"):
+        train_policy(config, progress=False)
+    assert not marker.exists()

@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from grits_lab.cli import main
-from grits_lab.config import config_from_dict
+from grits_lab.config import config_from_dict, config_to_dict
 from grits_lab.data.format import load_index
 from grits_lab.errors import ConfigError, InputError
 from grits_lab.spillage.predictor_checkpoint import load_predictor
@@ -192,3 +192,19 @@ def test_summaries_print_strict_json_without_bare_nan():
     text = to_json({"first_loss": float("nan"), "best": {"val_auroc": np.float32("inf"), "n": 3}})
     assert json.loads(text) == {"first_loss": None, "best": {"val_auroc": None, "n": 3}}
     assert "NaN" not in text and "Infinity" not in text
+
+
+def test_a_planted_pickle_is_refused_on_resume_and_by_eval_and_never_runs(tmp_path, tiny_dataset, plant_pickle, capsys):
+    cfg = _config(tmp_path, tiny_dataset, epochs=1)
+    train_predictor(cfg, progress=False)
+    last = tmp_path / "runs" / "tiny" / "last.pt"
+    marker = plant_pickle(last, last)
+    with pytest.raises(InputError, match=f"refused checkpoint {last}"):
+        train_predictor(_config(tmp_path, tiny_dataset, epochs=2), progress=False)
+    cfg_path = tmp_path / "p.yaml"
+    cfg_path.write_text(yaml.safe_dump(config_to_dict(cfg)))
+    capsys.readouterr()
+    assert main(["train", "predictor", str(cfg_path), "--eval", str(tiny_dataset), "--checkpoint", str(last)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(last) in err[0] and "refused" in err[0]
+    assert not marker.exists()
