@@ -7,7 +7,7 @@ from typing import ClassVar, Literal, Optional
 
 import pytest
 
-from grits_lab.config import config_fingerprint, config_from_dict, config_to_dict, load_config, require
+from grits_lab.config import config_fingerprint, config_from_dict, config_to_dict, load_config, load_yaml, require
 from grits_lab.errors import ConfigError
 
 
@@ -64,6 +64,25 @@ def test_load_config_reports_file_and_yaml_errors(tmp_path):
     wrong.write_text("inner:\n  count: 0\n")
     with pytest.raises(ConfigError, match=r"wrong.yaml: `inner.count` must be a positive integer"):
         load_config(wrong, OuterConfig)
+
+
+@pytest.mark.parametrize("text, key, lines", [
+    ("guidance: {rho: 2.5, s: 60}\nguidance: {rho: 8.0}\n", "guidance", (1, 2)),  # the field's case
+    ("inner:\n  count: 1\n  ratio: 0.5\n  count: 2\n", "inner.count", (2, 4)),
+    ("sizes: [{a: 1}, {a: 1, a: 2}]\n", "sizes[1].a", (1, 1)),
+])
+def test_a_key_given_twice_is_refused_naming_the_key_and_both_lines(tmp_path, text, key, lines):
+    path = tmp_path / "override.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_yaml(path)
+    assert str(info.value) == f"{path}: key `{key}` is given twice (lines {lines[0]} and {lines[1]}); give it once"
+
+
+def test_merge_keys_may_be_overridden_and_equal_text_of_other_types_are_two_keys(tmp_path):
+    path = tmp_path / "ok.yaml"
+    path.write_text("base: &b {count: 1}\ninner:\n  <<: *b\n  count: 2\n1: a\n'1': b\n")
+    assert load_yaml(path) == {"base": {"count": 1}, "inner": {"count": 2}, 1: "a", "1": "b"}
 
 
 @dataclasses.dataclass

@@ -17,7 +17,7 @@ from typing import Any, Callable
 
 import yaml
 
-from grits_lab.config import config_changes, config_fingerprint, config_to_dict
+from grits_lab.config import config_changes, config_fingerprint, config_to_dict, parse_yaml
 from grits_lab.data.format import (
     FORMAT_VERSION,
     LEGACY_CHUNK_KEY,
@@ -72,7 +72,7 @@ def existing_manifest(out_dir: str | Path, kind: str, identity: Any) -> dict[str
     if not manifest_path.exists():
         return None
     try:
-        manifest = yaml.safe_load(manifest_path.read_text()) or {}
+        manifest = parse_yaml(manifest_path.read_text(), manifest_path) or {}
     except yaml.YAMLError as exc:
         raise StorageError(f"unreadable manifest {manifest_path}: {exc}") from None
     fingerprint = config_fingerprint(identity)

@@ -8,6 +8,7 @@ from grits_lab.config.typed_yaml import (
     load_config,
     load_yaml,
     merge_mappings,
+    parse_yaml,
     require,
 )
 
@@ -19,5 +20,6 @@ __all__ = [
     "load_config",
     "load_yaml",
     "merge_mappings",
+    "parse_yaml",
     "require",
 ]

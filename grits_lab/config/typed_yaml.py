@@ -39,7 +39,7 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     if not path.is_file():
         raise ConfigError(f"config file not found: {path}")
     try:
-        data = yaml.safe_load(path.read_text())
+        data = parse_yaml(path.read_text(), path)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" (line {mark.line + 1})" if mark is not None else ""
@@ -49,6 +49,42 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: top level must be a mapping, got {type(data).__name__}")
     return data
+
+
+def parse_yaml(text: str, source: str | Path) -> Any:
+    """`yaml.safe_load(text)`, but a key given twice in one mapping is a ConfigError naming the
+    dotted key and both lines (PyYAML would silently keep the last); `source` names the file."""
+    loader = yaml.SafeLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        _refuse_repeated_keys(node, "", str(source), set())
+        return loader.construct_document(node)
+    finally:
+        loader.dispose()
+
+
+def _refuse_repeated_keys(node: yaml.Node, prefix: str, source: str, visited: set[int]) -> None:
+    if id(node) in visited:  # an alias: already checked where its anchor stands
+        return
+    visited.add(id(node))
+    if isinstance(node, yaml.SequenceNode):
+        for i, item in enumerate(node.value):
+            _refuse_repeated_keys(item, f"{prefix}[{i}]", source, visited)
+    elif isinstance(node, yaml.MappingNode):
+        lines: dict[tuple[str, Any], int] = {}
+        for key_node, value_node in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":  # `<<: *base`: its keys may be overridden here
+                _refuse_repeated_keys(value_node, prefix, source, visited)
+                continue
+            name = key_node.value if isinstance(key_node, yaml.ScalarNode) else repr(key_node.value)
+            key = f"{prefix}.{name}" if prefix else str(name)
+            line = key_node.start_mark.line + 1
+            if (key_node.tag, name) in lines:
+                raise ConfigError(f"{source}: key `{key}` is given twice (lines {lines[key_node.tag, name]} and {line}); give it once")
+            lines[key_node.tag, name] = line
+            _refuse_repeated_keys(value_node, key, source, visited)
 
 
 def load_config(path: str | Path, cls: type[T]) -> T:

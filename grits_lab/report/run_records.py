@@ -28,6 +28,7 @@ from typing import Any, Sequence
 import pandas as pd
 import yaml
 
+from grits_lab.config import parse_yaml
 from grits_lab.errors import InputError, StorageError
 from grits_lab.records import OUTCOME_COLUMNS
 from grits_lab.report.vocabulary import canonical_name, method_display
@@ -322,7 +323,7 @@ def _read_table(path: Path) -> pd.DataFrame:
 
 def _read_yaml(path: Path) -> dict[str, Any]:
     try:
-        loaded = yaml.safe_load(path.read_text())
+        loaded = parse_yaml(path.read_text(), path)
     except (OSError, yaml.YAMLError) as exc:
         raise StorageError(f"cannot read {path}: {exc}") from None
     return loaded if isinstance(loaded, dict) else {"value": loaded}

@@ -58,3 +58,19 @@ def test_a_planted_policy_checkpoint_is_refused_in_one_line_before_the_run_and_n
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"refused checkpoint {planted}" in err[0]
     assert not marker.exists() and not (tmp_path / "run").exists()
+
+
+def test_an_override_that_gives_guidance_twice_is_refused_naming_the_key_and_both_lines(models, tmp_path, capsys):
+    import yaml
+
+    from grits_lab.cli import main
+    from grits_lab.config import config_to_dict
+
+    base = tmp_path / "evaluate.yaml"
+    base.write_text(yaml.safe_dump(config_to_dict(eval_config(models, tmp_path / "run", methods=["grits"]))))
+    override = tmp_path / "override.yaml"
+    override.write_text("guidance: {rho: 2.5, s: 60}\nguidance: {rho: 8.0}\n")
+    assert main(["evaluate", str(base), "--override", str(override), "--serial", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"grits-lab: error: {override}: key `guidance` is given twice (lines 1 and 2); give it once"]
+    assert not (tmp_path / "run").exists()
