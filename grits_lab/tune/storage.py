@@ -17,6 +17,8 @@ import re
 import sys
 import time
 from pathlib import Path
+from typing import Callable
+from urllib.parse import unquote
 
 from optuna.storages import BaseStorage, JournalStorage, RDBStorage
 from optuna.storages.journal import JournalFileBackend, JournalFileSymlinkLock
@@ -29,8 +31,38 @@ _DRIVER_HINT = {"postgresql": "psycopg2-binary", "mysql": "PyMySQL"}
 
 
 def redact(spec: str) -> str:
-    """The storage spec with any password replaced by ***."""
-    return re.sub(r"(://[^/:@]*:)[^@/]*@", r"\1***@", spec)
+    """The storage spec with its password (and any `password=` query value) replaced by ***.
+
+    Found by parsing, not by a pattern of what a password may hold: the user information runs
+    from `://` to the last `@`, and the password from its first `:`, so a password holding `/`,
+    `:`, `@`, `?` or percent-escapes is hidden whole.
+    """
+    password = _password(spec)
+    shown = spec
+    if password:
+        scheme, rest = spec.split("://", 1)
+        user = rest.split(":", 1)[0]
+        shown = f"{scheme}://{user}:***@{rest[len(user) + 1 + len(password) + 1:]}"
+    return re.sub(r"([?&](?:password|passwd|pwd)=)[^&#]*", r"\1***", shown, flags=re.IGNORECASE)
+
+
+def _password(spec: str) -> str:
+    """The password as written in the URL `spec` ('' if none)."""
+    if "://" not in spec:
+        return ""
+    rest = spec.split("://", 1)[1]
+    if "@" not in rest:
+        return ""
+    userinfo = rest.rsplit("@", 1)[0]
+    return userinfo.split(":", 1)[1] if ":" in userinfo else ""
+
+
+def _scrubbed(text: str, spec: str) -> str:
+    """`text` (a driver's message) with the URL's password, as written and decoded, replaced by ***."""
+    password = _password(spec)
+    for form in sorted({password, unquote(password)} - {""}, key=len, reverse=True):
+        text = text.replace(form, "***")
+    return text
 
 
 def open_storage(spec: str | None, default_journal: Path) -> tuple[BaseStorage, str]:
@@ -44,9 +76,11 @@ def open_storage(spec: str | None, default_journal: Path) -> tuple[BaseStorage, 
         raise StorageError(
             f"unsupported storage URL {redact(spec)}: use postgresql://, mysql://, sqlite:/// or a journal file path"
         )
+    if "@" in _password(spec):  # SQLAlchemy ends the password at its first `@` and would take the rest for the host
+        raise StorageError(f"the password in storage URL {redact(spec)} holds a raw `@`: write it as %40")
     if scheme == "postgres":  # SQLAlchemy dropped this alias
         spec, scheme = "postgresql" + spec[len("postgres"):], "postgresql"
-    return _open_rdb(_with_available_driver(spec), scheme, redact(spec)), redact(spec)
+    return _open_rdb(_with_available_driver(spec), scheme, redact(spec), lambda text: _scrubbed(text, spec)), redact(spec)
 
 
 def _with_available_driver(url: str) -> str:
@@ -116,7 +150,7 @@ def _is_record(line: bytes) -> bool:
         return False
 
 
-def _open_rdb(url: str, scheme: str, shown: str) -> RDBStorage:
+def _open_rdb(url: str, scheme: str, shown: str, scrub: Callable[[str], str]) -> RDBStorage:
     import sqlalchemy.exc
 
     engine_kwargs: dict = {"pool_pre_ping": True}
@@ -131,15 +165,15 @@ def _open_rdb(url: str, scheme: str, shown: str) -> RDBStorage:
             driver = _DRIVER_HINT.get(scheme, "its database driver")
             raise StorageError(f"storage {shown} needs a database driver (pip install {driver})") from None
         except sqlalchemy.exc.OperationalError as exc:
-            raise StorageError(f"cannot reach storage {shown}: {_first_line(exc.orig or exc)}") from None
+            raise StorageError(f"cannot reach storage {shown}: {scrub(_first_line(exc.orig or exc))}") from None
         except (sqlalchemy.exc.IntegrityError, sqlalchemy.exc.ProgrammingError) as exc:
             if attempt == 4:
-                raise StorageError(f"cannot initialize storage {shown}: {_first_line(exc.orig or exc)}") from None
+                raise StorageError(f"cannot initialize storage {shown}: {scrub(_first_line(exc.orig or exc))}") from None
             time.sleep(0.2 * (attempt + 1))
-        except sqlalchemy.exc.ArgumentError as exc:
-            raise StorageError(f"invalid storage URL {shown}: {_first_line(exc)}") from None
+        except (sqlalchemy.exc.ArgumentError, ValueError) as exc:  # ValueError: a port that is not a number
+            raise StorageError(f"invalid storage URL {shown}: {scrub(_first_line(exc))}") from None
         except sqlalchemy.exc.SQLAlchemyError as exc:
-            raise StorageError(f"cannot open storage {shown}: {_first_line(exc)}") from None
+            raise StorageError(f"cannot open storage {shown}: {scrub(_first_line(exc))}") from None
     raise AssertionError("unreachable")
 
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import time
+from urllib.parse import unquote
 
 import pytest
 import yaml
@@ -10,7 +12,7 @@ from tests.tune.sweep_helpers import free_port
 
 from grits_lab.cli import main
 from grits_lab.errors import StorageError
-from grits_lab.tune.storage import open_storage
+from grits_lab.tune.storage import open_storage, redact
 
 
 def one_error_line(capsys) -> str:
@@ -26,6 +28,48 @@ def test_unreachable_postgres_url_is_rejected_quickly_without_the_password(sweep
     line = one_error_line(capsys)
     assert "cannot reach storage postgresql://grits:***@127.0.0.1" in line and "hunter2" not in line
     assert time.monotonic() - start < 20
+
+
+PASSWORDS = ["S3cr3t/x", "S3cr/et", "pa:ss:wd", "S3cr%2Fet%3A", "p?w#d"]  # `/`, `:`, percent-escapes, query marks
+
+
+@pytest.mark.parametrize("password", PASSWORDS)
+def test_a_password_is_hidden_whole_whatever_it_holds(password):
+    shown = redact(f"postgresql://grits:{password}@127.0.0.1:5999/sweeps")
+    assert shown == "postgresql://grits:***@127.0.0.1:5999/sweeps"
+    assert redact("postgresql://127.0.0.1/sweeps?sslmode=require&password=S3cr/et") == "postgresql://127.0.0.1/sweeps?sslmode=require&password=***"
+    assert redact("postgresql://grits@127.0.0.1/sweeps") == "postgresql://grits@127.0.0.1/sweeps"
+
+
+@pytest.mark.parametrize("password", ["S3cr3t/x", "pa:ss", "S3cr%2Fet"])
+def test_an_unreachable_url_is_refused_in_one_line_without_any_of_its_password(sweep_file, capsys, password):
+    url = f"postgresql://u:{password}@127.0.0.1:{free_port()}/db"
+    assert main(["sweep", str(sweep_file()), "--storage", url, "--no-progress"]) == 2
+    line = one_error_line(capsys)
+    assert "postgresql://u:***@127.0.0.1" in line
+    assert all(part not in line for part in {password, unquote(password), "S3cr", "ss"} if part)
+
+
+def test_a_raw_at_sign_in_a_password_is_refused_without_its_tail(sweep_file, capsys, tmp_path):
+    url = f"postgresql://u:p@ssw0rd@127.0.0.1:{free_port()}/db"
+    assert main(["sweep", str(sweep_file()), "--storage", url, "--no-progress"]) == 2
+    line = one_error_line(capsys)
+    assert "holds a raw `@`: write it as %40" in line and "ssw0rd" not in line
+    assert not (tmp_path / "results").exists()
+
+
+@pytest.mark.postgres
+def test_a_sweep_on_postgresql_never_prints_or_stores_its_password(sweep_file, postgres_url, tmp_path, capfd):
+    password = "S3cr/et:x%2F"  # the test server trusts every password: the URL is real, the password is only text
+    url = postgres_url.replace("postgres@", f"postgres:{password}@")
+    config = sweep_file("secret", n_trials=2, synthetic={"seconds_per_episode": 0.0})
+    assert main(["sweep", str(config), "--storage", url, "--no-progress", "--no-plots"]) == 0
+    out, err = capfd.readouterr()
+    summary = json.loads((tmp_path / "results" / "secret" / "summary.json").read_text())
+    assert summary["storage"].startswith("postgresql://postgres:***@127.0.0.1")
+    written = "".join(p.read_text(errors="replace") for p in (tmp_path / "results").rglob("*") if p.is_file())
+    for text in (out, err, written):
+        assert "S3cr" not in text
 
 
 @pytest.mark.parametrize("spec, message", [
