@@ -8,6 +8,7 @@ collapses to zero width and claims a certainty ten trials cannot give.
 from __future__ import annotations
 
 import math
+from decimal import ROUND_HALF_UP, Decimal
 from dataclasses import dataclass
 
 Z_95 = 1.959963984540054  # two-sided 95% quantile of the standard normal
@@ -50,14 +51,24 @@ def rate(k: int, n: int) -> Rate:
     return Rate(int(k), int(n), k / n if n else math.nan, low, high)
 
 
+def percent_digits(value: float) -> str:
+    """A fraction as a percent with one decimal, halves rounded up: 5/8 -> "62.5", 1/16 -> "6.3".
+
+    The one rounding rule of every rate the report prints (tables, headline and figure labels);
+    a float's binary residue (0.145 is 0.14499...) is removed before rounding.
+    """
+    scaled = Decimal(repr(100 * value)).quantize(Decimal("1e-12"))
+    return str(scaled.quantize(Decimal("0.1"), rounding=ROUND_HALF_UP))
+
+
 def format_rate(r: Rate, missing: str = "—") -> str:
     """`82.0% [73.3, 88.3] (82/100)`: percent, Wilson 95% interval in percent, counts."""
     if r.missing:
         return missing
-    return f"{100 * r.rate:.1f}% [{100 * r.low:.1f}, {100 * r.high:.1f}] ({r.k}/{r.n})"
+    return f"{percent_digits(r.rate)}% [{percent_digits(r.low)}, {percent_digits(r.high)}] ({r.k}/{r.n})"
 
 
 def format_percent(value: float | None, missing: str = "—") -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return missing
-    return f"{100 * value:.1f}%"
+    return f"{percent_digits(value)}%"

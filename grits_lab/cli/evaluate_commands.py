@@ -92,7 +92,8 @@ def _replay(args: argparse.Namespace) -> int:
     if args.plan_figure is not None and not args.plan_figure.endswith(".png"):
         raise InputError(f"--plan-figure must name a .png file. Got {args.plan_figure!r}.")
     result = replay_episode(args.run_dir, method=args.method, food=args.food, level=args.level, trial=args.trial,
-                            video=args.video, every=args.every, plan_figure=args.plan_figure, plan=args.plan)
+                            video=args.video, every=args.every, plan_figure=args.plan_figure, plan=args.plan,
+                            progress=args.video is not None and not args.json)
     if args.json:
         print(json.dumps(result.to_dict()))
     else:

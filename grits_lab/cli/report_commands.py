@@ -47,7 +47,7 @@ def _run(args: argparse.Namespace) -> int:
         if missing:
             raise InputError(f"--videos replays episodes from a `grits-lab evaluate` run directory; {run_dir} lacks {', '.join(missing)}")
         replay = replay_episode
-    result = build_report(args.run_dir, args.output_dir, also=args.also, videos=args.videos, replay=replay)
+    result = build_report(args.run_dir, args.output_dir, also=args.also, videos=args.videos, replay=replay, progress=True)
     print(f"report written to {result.out_dir} ({len(result.files)} files): {result.out_dir / 'report.html'}")
     for note in result.missing:
         print(f"  {note}")

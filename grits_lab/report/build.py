@@ -66,7 +66,7 @@ def default_out_dir(run_dir: str | Path) -> Path:
 
 
 def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also: Sequence[str | Path] = (),
-                 videos: int = 0, replay: Callable[..., Any] | None = None) -> ReportResult:
+                 videos: int = 0, replay: Callable[..., Any] | None = None, progress: bool = False) -> ReportResult:
     """Write the report of RUN_DIR into `out_dir` (default RUN_DIR/report).
 
     also: further run directories whose episode records are reported beside RUN_DIR's (a method
@@ -75,7 +75,8 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also
     videos: replay up to this many episodes per food (grits_lab/report/videos.py has the rule)
     under Diffusion Policy and GRITS and show them side by side; `replay` is the function that
     replays one recorded episode into a video (`grits_lab.report.replay.replay_episode`).
-    With videos = 0 (the default) nothing is replayed and no simulator is needed.
+    With videos = 0 (the default) nothing is replayed and no simulator is needed. progress: a
+    bar on stderr while the videos are replayed.
     """
     out = Path(out_dir) if out_dir is not None else default_out_dir(run_dir)
     run = load_run(run_dir, exclude=out, also=also)
@@ -85,7 +86,7 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also
     if videos > 0 and run.episodes is not None:
         if replay is None:
             raise ValueError("videos > 0 needs a replay function")
-        sections.insert(0, _videos_section(run, out, videos, replay, result))
+        sections.insert(0, _videos_section(run, out, videos, replay, result, progress))
     missing = list(dict.fromkeys(note for table in result.tables for note in table.notes if note.startswith("Missing")))
     result.missing = missing
     overview = Section("Overview", [
@@ -176,11 +177,12 @@ def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Sec
     return sections
 
 
-def _videos_section(run: RunData, out: Path, per_food: int, replay: Callable[..., Any], result: ReportResult) -> Section:
+def _videos_section(run: RunData, out: Path, per_food: int, replay: Callable[..., Any], result: ReportResult,
+                    progress: bool) -> Section:
     from grits_lab.report.videos import choose_episodes, film_picks
 
     picks = choose_episodes(run.episodes, per_food)
-    rows = film_picks(run.run_dir, picks, replay, out)
+    rows = film_picks(run.run_dir, picks, replay, out, progress=progress)
     result.files += [out / v.path for row in rows for v in row.videos if v.path]
     intro = (f"Replayed from their records (same seed, checkpoints and guidance), up to {per_food} per food, chosen in this "
              "order: Diffusion Policy spilled and GRITS did not; both spilled; GRITS spilled and DP did not; neither "

@@ -17,6 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from grits_lab.intervals import percent_digits  # noqa: E402
 from grits_lab.io import atomic_path  # noqa: E402
 from grits_lab.records import OUTCOME_COLUMNS  # noqa: E402
 from grits_lab.report.sweep import PAPER_DEFAULTS, SweepSummary  # noqa: E402
@@ -43,6 +44,7 @@ CATEGORY_COLORS = {
 
 
 VARIANT_HATCHES = ("", "//", "..", "xx", "\\\\")
+MARKER_PT = 5  # size of the paper's diamonds (points)
 
 
 def method_color(method: str, fallback_index: int) -> tuple:
@@ -51,6 +53,11 @@ def method_color(method: str, fallback_index: int) -> tuple:
 
 def method_bars(data: pd.DataFrame, path: Path, title: str) -> Path:
     """Grouped bars: outcome groups, one bar per method, Wilson 95% error bars, paper values as diamonds."""
+    return _save(method_bars_figure(data, title), path)
+
+
+def method_bars_figure(data: pd.DataFrame, title: str) -> plt.Figure:
+    """The figure `method_bars` saves; each bar's label above its error bar and the paper's diamond."""
     n_methods = max(len(data), 1)
     width = 0.8 / n_methods
     fig, ax = plt.subplots(figsize=(max(7.5, 1.0 + 1.1 * n_methods * len(OUTCOME_COLUMNS) * 0.45), 4.6))
@@ -74,10 +81,14 @@ def method_bars(data: pd.DataFrame, path: Path, title: str) -> Path:
             ax.bar(x[j], 100 * value, width * 0.92, color=color, label=label if j == 0 else None,
                    hatch=hatch, edgecolor="white" if hatch else None, linewidth=0,
                    yerr=[[100 * (value - low)], [100 * (high - value)]], capsize=2.5, error_kw={"lw": 0.9, "ecolor": "0.2"})
-            ax.text(x[j], 100 * high + 1.2, f"{100 * value:.0f}", ha="center", va="bottom", fontsize=6.5)
             paper = row.get(f"{outcome}_paper", math.nan)
+            # The label sits above the error bar and above the paper's diamond (its half-height is
+            # MARKER_PT / 2 points), so neither hides it, whatever the figure's scale.
+            top, clearance = (high, 1.5) if math.isnan(paper) else (max(high, paper), 1.5 + MARKER_PT / 2 + 1.3)
+            ax.annotate(percent_digits(value), (x[j], 100 * top), xytext=(0, clearance), textcoords="offset points",
+                        ha="center", va="bottom", fontsize=6.5, annotation_clip=False)
             if not math.isnan(paper):
-                ax.plot(x[j], 100 * paper, marker="D", color="black", markersize=5, linestyle="none",
+                ax.plot(x[j], 100 * paper, marker="D", color="black", markersize=MARKER_PT, linestyle="none",
                         markerfacecolor="white", markeredgewidth=1.3, label=PAPER_LABEL if not paper_drawn else None, zorder=5)
                 paper_drawn = True
         if all(math.isnan(row[f"{o}_rate"]) for o in OUTCOME_COLUMNS):
@@ -90,7 +101,7 @@ def method_bars(data: pd.DataFrame, path: Path, title: str) -> Path:
     ax.set_axisbelow(True)
     ax.legend(fontsize=7.5, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
     fig.text(0.01, 0.01, "bars: simulation, error bars: Wilson 95% interval; n/a: no episodes", fontsize=7, color="0.35")
-    return _save(fig, path)
+    return fig
 
 
 def per_food_stacks(data: pd.DataFrame, path: Path, title: str) -> Path:
@@ -135,30 +146,37 @@ def per_food_stacks(data: pd.DataFrame, path: Path, title: str) -> Path:
 
 def breakdown_heatmap(wide: dict[str, pd.DataFrame], variants: list[tuple[str, str]], path: Path) -> Path:
     """Rate per (food, level) x method for each outcome, annotated with k/n; missing cells hatched."""
+    return _save(breakdown_heatmap_figure(wide, variants), path)
+
+
+def breakdown_heatmap_figure(wide: dict[str, pd.DataFrame], variants: list[tuple[str, str]]) -> plt.Figure:
+    """The figure `breakdown_heatmap` saves: one panel per outcome, stacked, methods as rows and
+    (food, level) cells as columns, so no title has a neighbour beside it and the width does not
+    grow with the number of methods."""
     first = next(iter(wide.values()))
-    rows = [f"{food_display(f)} / {lv}" for f, lv in zip(first["food"], first["level"])]
-    fig, axes = plt.subplots(1, len(wide), figsize=(1.0 + len(wide) * (0.62 * len(variants) + 0.9), 0.27 * len(rows) + 2.0),
-                             sharey=True, squeeze=False)
-    image = None
-    for ax, (outcome, frame) in zip(axes[0], wide.items()):
-        values = np.array([[frame[f"{v}_rate"].iloc[r] for v, _ in variants] for r in range(len(frame))], dtype=float)
+    cells = [f"{food_display(f)} / {lv}" for f, lv in zip(first["food"], first["level"])]
+    panel_height = 0.3 * len(variants) + 1.1
+    fig, axes = plt.subplots(len(wide), 1, figsize=(2.2 + 0.42 * len(cells), len(wide) * panel_height + 0.6),
+                             sharex=True, squeeze=False, layout="constrained")
+    for ax, (outcome, frame) in zip(axes[:, 0], wide.items()):
+        values = np.array([[frame[f"{v}_rate"].iloc[c] for c in range(len(frame))] for v, _ in variants], dtype=float)
         masked = np.ma.masked_invalid(values)
         # Light sequential maps keep the k/n text legible; green = good outcome, red = bad.
         cmap = plt.get_cmap("Greens" if outcome == "task_success" else "Reds").with_extremes(bad="white")
-        image = ax.imshow(masked, cmap=cmap, vmin=0, vmax=1.4, aspect="auto")
-        for r in range(values.shape[0]):
-            for c, (variant, _) in enumerate(variants):
-                n = int(frame[f"{variant}_n"].iloc[r])
+        ax.imshow(masked, cmap=cmap, vmin=0, vmax=1.4, aspect="auto")
+        for r, (variant, _) in enumerate(variants):
+            for c in range(len(frame)):
+                n = int(frame[f"{variant}_n"].iloc[c])
                 if n == 0:
                     ax.add_patch(plt.Rectangle((c - 0.5, r - 0.5), 1, 1, fill=False, hatch="///", edgecolor="0.7", lw=0))
                     ax.text(c, r, "—", ha="center", va="center", fontsize=7, color="0.4")
                 else:
-                    ax.text(c, r, f"{int(frame[f'{variant}_k'].iloc[r])}/{n}", ha="center", va="center", fontsize=7)
-        ax.set_xticks(range(len(variants)), [name for _, name in variants], rotation=40, ha="right", fontsize=7.5)
-        ax.set_yticks(range(len(rows)), rows, fontsize=7.5)
-        ax.set_title(f"{OUTCOME_NAMES[outcome]} (darker = higher rate)", fontsize=9)
-    fig.suptitle("Per food x quantity level (cells: k/n; hatched —: no episodes)", fontsize=11)
-    return _save(fig, path)
+                    ax.text(c, r, f"{int(frame[f'{variant}_k'].iloc[c])}/{n}", ha="center", va="center", fontsize=6.5)
+        ax.set_yticks(range(len(variants)), [name for _, name in variants], fontsize=7.5)
+        ax.set_xticks(range(len(cells)), cells, rotation=50, ha="right", fontsize=7.5)
+        ax.set_title(OUTCOME_NAMES[outcome], fontsize=9, loc="left")
+    fig.suptitle("Per food x quantity level (cells: k/n; darker = higher rate; hatched —: no episodes)", fontsize=11)
+    return fig
 
 
 def sweep_front(summary: SweepSummary, path: Path) -> Path | None:

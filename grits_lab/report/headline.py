@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import pandas as pd
 
+from grits_lab.intervals import format_percent
 from grits_lab.records import OUTCOME_COLUMNS
 from grits_lab.report.tables import ReportTable, variants_of
 from grits_lab.report.vocabulary import MISSING, OUTCOME_NAMES, PER_FOOD_METHODS, SIM_LABEL, method_display
 
 
 def _cell(k: int, n: int) -> str:
-    return f"{k / n:.0%} ({k}/{n})" if n else MISSING
+    return f"{format_percent(k / n)} ({k}/{n})" if n else MISSING
 
 
 def headline_table(episodes: pd.DataFrame | None, methods: tuple[str, ...] = PER_FOOD_METHODS) -> ReportTable:

@@ -5,7 +5,9 @@ writer walks the same model, so the formats cannot disagree about what the repor
 The HTML page embeds its figures as base64 data URIs and its style inline: it opens offline,
 can be mailed as one file, and references nothing outside itself, except the videos of
 `grits-lab report --videos`, which sit beside it in `videos/` (the folder travels as one).
-Wide tables scroll inside their own box; lists of missing cells are collapsed.
+Words in tables wrap and numbers never break, so tables narrow to a laptop's window; a table
+split per method (`ReportTable.parts`) shows each part under its subtitle; anything still too
+wide scrolls inside its own box. Lists of missing cells are collapsed.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import base64
 import html
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Union
@@ -63,18 +66,28 @@ def write_csv(table: ReportTable, path: Path) -> Path:
     return path
 
 
+def table_frames(table: ReportTable) -> list[tuple[str, pd.DataFrame]]:
+    """What a reader sees of `table`: its narrower parts under their subtitles, else the whole display."""
+    if table.parts:
+        return table.parts
+    return [("", table.display if not table.display.empty else pd.DataFrame({"": [MISSING]}))]
+
+
 def table_latex(table: ReportTable) -> str:
-    """A booktabs table environment; cells and headers escaped for LaTeX."""
-    frame = table.display if not table.display.empty else pd.DataFrame({"": [MISSING]})
-    styler = frame.style.hide(axis="index").format(escape="latex").format_index(escape="latex", axis=1)
-    body = styler.to_latex(hrules=True, column_format="l" * frame.shape[1])
+    """A booktabs table environment (one tabular per part); cells and headers escaped for LaTeX."""
+    bodies = []
+    for subtitle, frame in table_frames(table):
+        styler = frame.style.hide(axis="index").format(escape="latex").format_index(escape="latex", axis=1)
+        body = styler.to_latex(hrules=True, column_format="l" * frame.shape[1])
+        heading = f"\\textbf{{{_latex_escape(subtitle)}}}\\\\\n" if subtitle else ""
+        bodies.append(f"{heading}\\resizebox{{\\linewidth}}{{!}}{{%\n{body}}}\n")
     caption = _latex_escape(f"{table.title}. {table.caption}")
     return (
         "% needs \\usepackage{booktabs,graphicx}\n"
         "\\begin{table}[t]\n\\centering\n"
         f"\\caption{{{caption}}}\n\\label{{tab:{table.key}}}\n"
-        f"\\resizebox{{\\linewidth}}{{!}}{{%\n{body}}}\n"
-        "\\end{table}\n"
+        + "\\medskip\n".join(bodies)
+        + "\\end{table}\n"
     )
 
 
@@ -85,7 +98,8 @@ def render_markdown(title: str, sections: list[Section], out_dir: Path) -> str:
         for item in section.items:
             if isinstance(item, ReportTable):
                 lines += [f"### {item.title}", "", item.caption, ""]
-                lines += [_markdown_table(item.display), ""]
+                for subtitle, frame in table_frames(item):
+                    lines += ([f"#### {subtitle}", ""] if subtitle else []) + [_markdown_table(frame), ""]
                 lines += [f"- {note}" for note in item.notes]
                 lines += [f"- Files: csv/{item.key}.csv, latex/{item.key}.tex", ""]
             elif isinstance(item, ReportFigure):
@@ -117,9 +131,10 @@ def render_html(title: str, sections: list[Section]) -> str:
         for item in section.items:
             if isinstance(item, ReportTable):
                 parts.append(f"<h3>{html.escape(item.title)}</h3><p class=caption>{html.escape(item.caption)}</p>")
-                frame = item.display if not item.display.empty else pd.DataFrame({"": [MISSING]})
-                table = frame.to_html(index=False, escape=True, border=0, na_rep=MISSING, classes="data")
-                parts.append(f'<div class="scroll">{table}</div>')
+                for subtitle, frame in table_frames(item):
+                    if subtitle:
+                        parts.append(f"<h4>{html.escape(subtitle)}</h4>")
+                    parts.append(f'<div class="scroll">{_html_table(frame)}</div>')
                 notes = [n for n in item.notes if not is_missing_note(n)]
                 missing = [n for n in item.notes if is_missing_note(n)]
                 if notes:
@@ -155,6 +170,24 @@ def _details(summary: str, lines: list[str]) -> str:
     return f"<details class=missing><summary>{html.escape(summary)}</summary><ul class=notes>{body}</ul></details>"
 
 
+# A cell that starts with a digit or a dash is a number, a rate or a count: it never breaks
+# across lines; words (names, notes, headers) wrap, so a table narrows to fit the page.
+_NUMERIC_CELL = re.compile(r"^[-+\u2212\u2014]?\d|^\u2014$")
+
+
+def _html_table(frame: pd.DataFrame) -> str:
+    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in frame.columns)
+    rows = []
+    for values in frame.itertuples(index=False):
+        cells = []
+        for value in values:
+            text = MISSING if value is None or (isinstance(value, float) and pd.isna(value)) else str(value)
+            numeric = " class=n" if _NUMERIC_CELL.match(text) else ""
+            cells.append(f"<td{numeric}>{html.escape(text)}</td>")
+        rows.append("<tr>" + "".join(cells) + "</tr>")
+    return f'<table class="data"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
+
+
 def to_json_text(value: object) -> str:
     return json.dumps(value, indent=2, sort_keys=False, default=str)
 
@@ -177,8 +210,10 @@ body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max
 h1{font-size:1.6em}h2{border-bottom:2px solid #ddd;padding-bottom:.2em;margin-top:2em}h3{margin-bottom:.2em}
 div.scroll{max-width:100%;overflow-x:auto;margin:.5em 0}
 table.data{border-collapse:collapse;font-size:.82em}
-table.data th,table.data td{border-bottom:1px solid #e3e3e3;padding:.25em .6em;text-align:left;white-space:nowrap}
-table.data thead th{border-bottom:2px solid #999;background:#f6f6f6}
+table.data th,table.data td{border-bottom:1px solid #e3e3e3;padding:.25em .6em;text-align:left}
+table.data td.n{white-space:nowrap}
+table.data thead th{border-bottom:2px solid #999;background:#f6f6f6;vertical-align:bottom;min-width:4em}
+h4{margin:.8em 0 .2em;font-size:.95em}
 p.caption{color:#555;font-size:.9em;margin-top:0}ul.notes{color:#555;font-size:.85em}
 figure{margin:1em 0}figure img{max-width:100%;border:1px solid #eee}figcaption{font-size:.85em;color:#555}
 pre{background:#f6f6f6;padding:.8em;overflow-x:auto;font-size:.8em}nav ol{columns:2;font-size:.9em}

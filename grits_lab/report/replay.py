@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import pandas as pd
@@ -195,8 +195,24 @@ class _FilmedEnv:
         return out
 
 
+class _CountedEnv:
+    """An env that calls `tick()` after every action (a progress bar's update)."""
+
+    def __init__(self, env: Any, tick: Callable[[], Any]) -> None:
+        self._env, self._tick = env, tick
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._env, name)
+
+    def step(self, action: Any) -> Any:
+        out = self._env.step(action)
+        self._tick()
+        return out
+
+
 def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, trial: int, video: str | Path | None = None,
-                   camera: Any = None, every: int = 1, plan_figure: str | Path | None = None, plan: int | None = None) -> ReplayResult:
+                   camera: Any = None, every: int = 1, plan_figure: str | Path | None = None, plan: int | None = None,
+                   progress: bool = False) -> ReplayResult:
     """Re-run one recorded evaluation episode and compare its metrics with the record.
 
     video: `.mp4` or `.gif` path for a captioned video (None: no rendering at all); camera: a
@@ -204,7 +220,7 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
     k-th action. plan_figure: a `.png` path for the guidance picture of one guided plan (`plan`,
     default the plan guidance moved farthest): the unguided and guided executed chunks from the
     same noise over the composite cloud, with P(spill) of each (grits_lab.report.guidance_effect.plan_figure);
-    InputError for a method without guidance. Raises InputError (no such record, no config), StorageError (a checkpoint whose
+    InputError for a method without guidance. progress: a bar on stderr counting the actions played. Raises InputError (no such record, no config), StorageError (a checkpoint whose
     digest differs from the record's) or ConfigError (a config that no longer loads).
     """
     import torch
@@ -214,6 +230,7 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
     from grits_lab.perception.env_clouds import builder_for_env
     from grits_lab.sim.env import ScoopEnv
     from grits_lab.sim.video import VIDEO_CAMERA, check_video_path, write_video
+    from tqdm import tqdm
 
     if video is not None:
         video = check_video_path(video)
@@ -238,7 +255,10 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
             setting = "" if math.isnan(rho) else f"   rho {rho:g}" + (f" s {s}" if s >= 0 else "")
             title = f"{method}   {food} / {level}   trial {trial}   seed {seed}{setting}"
             played = _FilmedEnv(env, title, camera or VIDEO_CAMERA, every)
-        replayed = run_task_episode(played, controller, config, seed=seed, food=food, level=level, builder=builder)
+        bar = tqdm(desc=f"replaying {method} {food}/{level} trial {trial}", unit="action", disable=not progress, dynamic_ncols=True)
+        replayed = run_task_episode(_CountedEnv(played, bar.update) if progress else played, controller, config,
+                                    seed=seed, food=food, level=level, builder=builder)
+        bar.close()
     finally:
         env.close()
     # A column the record lacks, or holds empty while the replay measured it (a run resumed across

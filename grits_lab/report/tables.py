@@ -53,6 +53,9 @@ class ReportTable:
     display: pd.DataFrame
     data: pd.DataFrame
     notes: list[str] = field(default_factory=list)
+    # A table too wide for a laptop's window is shown as these narrower ones, each under its
+    # subtitle (one per method); `display` and the CSV keep the whole table.
+    parts: list[tuple[str, pd.DataFrame]] = field(default_factory=list)
 
 
 def outcome_rates(rows: pd.DataFrame) -> dict[str, Rate]:
@@ -145,25 +148,28 @@ def per_food_table(episodes: pd.DataFrame | None) -> ReportTable:
         sub = episodes[episodes["method"].isin(PER_FOOD_METHODS)]
         foods += [f for f in ordered(sub["food_key"].unique(), ()) if f not in FOOD_ABBREVIATIONS]
     display_rows, data_rows = [], []
+    parts: dict[str, list[dict[str, str]]] = {name: [] for _, name in variants}
     for food in [*foods, None]:
         shown = {"Food": "All foods" if food is None else food_display(food, long=True)}
         for variant, name in variants:
-            rows = _select(episodes, variant=variant, food_key=food)
+            # The last row pools every food of the method (no food filter).
+            rows = _select(episodes, variant=variant, **({} if food is None else {"food_key": food}))
             counts = per_food_category(rows).value_counts() if len(rows) else pd.Series(dtype=int)
-            shown[f"{name}: episodes"] = str(len(rows)) if len(rows) else MISSING
+            part = {"Food": shown["Food"], "Episodes": str(len(rows)) if len(rows) else MISSING}
             for category in PER_FOOD_CATEGORIES:
                 k = int(counts.get(category, 0))
                 r = rate(k, len(rows))
-                if food is None:
-                    shown[f"{name}: {PER_FOOD_CATEGORY_NAMES[category]}"] = format_rate(r)
-                else:
-                    shown[f"{name}: {PER_FOOD_CATEGORY_NAMES[category]}"] = f"{k}" if len(rows) else MISSING
+                part[PER_FOOD_CATEGORY_NAMES[category]] = (
+                    format_rate(r) if food is None else f"{k}" if len(rows) else MISSING)
                 data_rows.append({
                     "food": "all" if food is None else food, "abbreviation": FOOD_ABBREVIATIONS.get(food, ""),
                     "method": variant.split("[")[0], "variant": variant, "method_name": name, "category": category,
                     "k": k if len(rows) else math.nan, "episodes": len(rows),
                     "rate": r.rate, "ci_low": r.low, "ci_high": r.high,
                 })
+            parts[name].append(part)
+            shown.update({f"{name}: {column.lower() if column == 'Episodes' else column}": value
+                          for column, value in part.items() if column != "Food"})
         display_rows.append(shown)
     missing = [
         f"{name}: {', '.join(food_display(f, long=True) for f in foods if not len(_select(episodes, variant=v, food_key=f)))}"
@@ -173,7 +179,8 @@ def per_food_table(episodes: pd.DataFrame | None) -> ReportTable:
     if missing:
         notes.append("Missing (no episode records): " + "; ".join(missing) + ".")
     notes.append("Cells are episode counts per food; the last row gives rates with Wilson 95% intervals over all foods.")
-    return ReportTable(key, title, caption, pd.DataFrame(display_rows), pd.DataFrame(data_rows), notes)
+    return ReportTable(key, title, caption, pd.DataFrame(display_rows), pd.DataFrame(data_rows), notes,
+                       parts=[(name, pd.DataFrame(rows)) for name, rows in parts.items()])
 
 
 def breakdown_long(episodes: pd.DataFrame) -> pd.DataFrame:

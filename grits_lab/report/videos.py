@@ -96,20 +96,31 @@ def choose_episodes(episodes: pd.DataFrame, per_food: int, methods: tuple[str, s
 
 
 def film_picks(run_dir: str | Path, picks: list[VideoPick], replay: Callable[..., Any], out_dir: Path,
-               suffix: str = ".mp4") -> list[VideoRow]:
-    """Replay every pick under each of its methods into OUT/videos/; a replay that fails is shown with its error."""
+               suffix: str = ".mp4", progress: bool = False) -> list[VideoRow]:
+    """Replay every pick under each of its methods into OUT/videos/; a replay that fails is shown with its error.
+
+    progress: a tqdm bar on stderr, one tick per video (each takes tens of seconds).
+    """
+    from tqdm import tqdm
+
     rows = []
+    bar = tqdm(total=sum(len(p.methods) for p in picks), desc="replaying episodes", unit="video",
+               disable=not progress, dynamic_ncols=True)
     for pick in picks:
         row = VideoRow(f"{food_display(pick.food, long=True)} / {pick.level}, trial {pick.trial} (seed {pick.seed}): {pick.reason}")
         for method in pick.methods:
             relative = f"videos/{pick.food}-{pick.level}-{pick.trial}-{method}{suffix}"
+            bar.set_postfix_str(f"{method} {pick.food}/{pick.level} trial {pick.trial}")
             try:
                 result = replay(run_dir, method=method, food=pick.food, level=pick.level, trial=pick.trial, video=out_dir / relative)
             except GritsError as exc:
                 row.videos.append(EpisodeVideo(method, None, f"{method_display(method)}: not replayed: {exc}"))
                 continue
+            finally:
+                bar.update()
             row.videos.append(EpisodeVideo(method, relative, f"{method_display(method)}: {_outcome(result.replayed)}. {result.describe()}"))
         rows.append(row)
+    bar.close()
     return rows
 
 

@@ -87,7 +87,7 @@ def test_a_food_recorded_for_one_method_only_shows_that_method():
     assert len(picks) == 1 and picks[0].methods == ["grits"] and picks[0].trial == 1
 
 
-def test_a_replay_that_cannot_run_is_shown_with_its_reason(tmp_path):
+def test_a_replay_that_cannot_run_is_shown_with_its_reason(tmp_path, capsys):
     from grits_lab.errors import StorageError
 
     def replay(run_dir, *, method, food, level, trial, video):
@@ -99,10 +99,12 @@ def test_a_replay_that_cannot_run_is_shown_with_its_reason(tmp_path):
                                describe=lambda: "replay reproduces the record")
 
     rows = [episode("dp", "sago", "low", 0, "spill"), episode("grits", "sago", "low", 0, "success")]
-    [row] = film_picks(tmp_path, picks_for(rows, 1), replay, tmp_path)
+    [row] = film_picks(tmp_path, picks_for(rows, 1), replay, tmp_path, progress=True)
     dp, grits = row.videos
     assert dp.path is None and "checkpoint `policy` changed" in dp.caption
     assert grits.path == "videos/sago-low-0-grits.mp4" and "reproduces" in grits.caption
+    final = capsys.readouterr().err.replace("\r", "\n").strip().splitlines()[-1]
+    assert final.startswith("replaying episodes") and "2/2" in final  # one tick per video, failed ones too
 
 
 def test_guidance_distributions_per_method_from_the_records(tmp_path):
@@ -166,3 +168,66 @@ def test_guidance_by_plan_index_shows_where_in_the_scoop_guidance_acts(tmp_path)
     assert grits.loc[1, "displacement_mm_median"] == pytest.approx(9.0) and grits.loc[0, "p_spill_unguided_median"] == pytest.approx(0.01)
     assert (grits["plans"] == grits.loc[0, "plans"]).all() and grits.loc[0, "plans"] > 0
     assert "Guidance by plan index" in (result.out_dir / "report.html").read_text()
+
+
+def test_the_all_foods_row_pools_every_food_of_the_method():
+    from grits_lab.report.tables import per_food_table
+
+    rows = [episode("grits", "sago", "low", i, "success" if i < 3 else "spill") for i in range(5)]
+    rows += [episode("grits", "fudge", "low", i, "success") for i in range(3)]
+    parts = dict(per_food_table(normalize_records(pd.DataFrame(rows))).parts)
+    pooled = parts["GRITS"].set_index("Food").loc["All foods"]
+    assert pooled["Episodes"] == "8"
+    assert pooled["Success"] == "75.0% [40.9, 92.9] (6/8)" and pooled["Spillage (before scoop)"] == "25.0% [7.1, 59.1] (2/8)"
+    assert parts["Diffusion Policy"].set_index("Food").loc["All foods", "Success"] == "—"  # no DP records at all
+
+
+def test_every_rate_is_rounded_one_way_halves_up():
+    from grits_lab.intervals import format_percent, format_rate, rate
+    from grits_lab.report.headline import headline_table
+
+    assert format_percent(5 / 8) == "62.5%" and format_percent(1 / 16) == "6.3%" and format_percent(0.145) == "14.5%"
+    rows = [episode("grits", "sago", "low", i, "success" if i < 5 else "spill") for i in range(8)]
+    headline = headline_table(normalize_records(pd.DataFrame(rows))).display.set_index("Method")
+    assert headline.loc["GRITS", "Task success"] == "62.5% (5/8)"
+    assert format_rate(rate(5, 8)).startswith("62.5% [")
+
+
+def _overlap(a, b) -> bool:
+    return a.x0 < b.x1 and b.x0 < a.x1 and a.y0 < b.y1 and b.y0 < a.y1
+
+
+def test_breakdown_heatmap_titles_do_not_overlap_with_two_methods():
+    from grits_lab.report import figures
+    from grits_lab.report.tables import all_variants, breakdown_tables
+
+    rows = [episode(m, "sago", lv, i, "success") for m in ("dp", "grits") for lv in ("low", "high") for i in range(2)]
+    records = normalize_records(pd.DataFrame(rows))
+    wide = {t.key.removeprefix("breakdown_"): t.data for t in breakdown_tables(records)}
+    fig = figures.breakdown_heatmap_figure(wide, all_variants(records))
+    renderer = fig.canvas.get_renderer()
+    fig.canvas.draw()
+    titles = [ax.title.get_window_extent(renderer) for ax in fig.axes] + [fig._suptitle.get_window_extent(renderer)]
+    assert len(titles) == 4
+    assert not any(_overlap(a, b) for i, a in enumerate(titles) for b in titles[i + 1:])
+
+
+def test_fig5_labels_sit_clear_of_the_papers_diamonds():
+    from grits_lab.report import figures
+    from grits_lab.report.tables import method_table
+    from grits_lab.report.vocabulary import MAIN_METHODS
+
+    # GRITS at 7/12 task success: the interval ends at 80.7 %, just under the paper's 82 % diamond,
+    # where a label drawn right above the error bar would sit under the diamond.
+    rows = [episode("grits", "sago", "low", i, "success" if i < 7 else "spill") for i in range(12)]
+    table = method_table(normalize_records(pd.DataFrame(rows)), MAIN_METHODS, "fig5", "Fig. 5", "")
+    fig = figures.method_bars_figure(table.data, "Fig. 5")
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    renderer = fig.canvas.get_renderer()
+    labels = [t for t in ax.texts if t.get_text()[:1].isdigit()]
+    diamonds = [line for line in ax.lines if line.get_marker() == "D"]
+    assert {t.get_text() for t in labels} == {"58.3", "41.7", "0.0"} and len(diamonds) == 3
+    for diamond in diamonds:
+        box = diamond.get_window_extent(renderer)
+        assert not any(_overlap(box, t.get_window_extent(renderer)) for t in labels)
