@@ -39,4 +39,4 @@ __all__ = [
 
 
 if ENV_ID not in gymnasium.registry:
-    gymnasium.register(id=ENV_ID, entry_point=ScoopGymEnv, max_episode_steps=None)
+    gymnasium.register(id=ENV_ID, entry_point=ScoopGymEnv, max_episode_steps=SimConfig().max_episode_steps)

@@ -13,6 +13,8 @@ import grits_lab.sim  # noqa: F401  (registers grits_lab/Scoop-v0)
 from grits_lab.errors import InputError
 from grits_lab.sim import ENV_ID, ScoopEnv, ScoopGymEnv, nominal_expert_trajectory
 from grits_lab.sim.foods import level_count, load_foods
+from grits_lab.sim.gym_env import RELATIVE_SCALE, WORKSPACE
+from grits_lab.sim.sim_config import SimConfig
 
 
 def smallest_food_level() -> tuple[str, str]:
@@ -28,6 +30,11 @@ def make(**kwargs):
     return gymnasium.make(ENV_ID, food=FOOD, level=LEVEL, **kwargs)
 
 
+def make_absolute(**kwargs):
+    """The env taking 9-D poses, as the expert trajectories are written."""
+    return make(action_mode="absolute", **kwargs)
+
+
 def test_the_registered_env_passes_gymnasiums_checker_without_warnings():
     env = make(render_mode="rgb_array")
     try:
@@ -41,7 +48,7 @@ def test_the_registered_env_passes_gymnasiums_checker_without_warnings():
 
 
 def test_observations_lie_in_the_declared_spaces_along_an_expert_scoop():
-    env = make()
+    env = make_absolute()
     try:
         obs, info = env.reset(seed=4)
         assert obs in env.observation_space
@@ -59,7 +66,7 @@ def test_observations_lie_in_the_declared_spaces_along_an_expert_scoop():
 def test_the_same_seed_gives_identical_observations_and_rewards():
     runs = []
     for _ in range(2):
-        env = make()
+        env = make_absolute()
         try:
             obs, _ = env.reset(seed=7)
             traj = nominal_expert_trajectory(env.unwrapped.scene())[:15]
@@ -131,3 +138,83 @@ def test_rgb_array_rendering_shows_the_scene_and_no_render_mode_renders_nothing(
 def test_an_unknown_food_fails_when_the_env_is_made():
     with pytest.raises(InputError, match="no_such_food"):
         gymnasium.make(ENV_ID, food="no_such_food")
+
+
+@pytest.mark.parametrize("action_mode", ["relative", "absolute"])
+def test_both_action_modes_pass_the_checker(action_mode):
+    env = make(action_mode=action_mode)
+    try:
+        assert env.action_space.shape == ((6,) if action_mode == "relative" else (9,))
+        check_env(env.unwrapped, skip_render_check=True)
+    finally:
+        env.close()
+
+
+def test_the_registration_declares_the_truncation_step():
+    env = make()
+    try:
+        assert env.spec.max_episode_steps == SimConfig().max_episode_steps == 400
+    finally:
+        env.close()
+
+
+def random_ik_failures(action_mode: str, n: int = 20) -> tuple[int, float]:
+    """(IK failures, largest commanded joint step in rad) over `n` uniformly random actions."""
+    env = make(action_mode=action_mode)
+    try:
+        env.reset(seed=0)
+        env.action_space.seed(0)
+        failures, largest = 0, 0.0
+        for _ in range(n):
+            *_, info = env.step(env.action_space.sample())
+            failures += int(info["ik_failure"])
+            largest = max(largest, info["joint_step"])
+        return failures, largest
+    finally:
+        env.close()
+
+
+def test_a_random_agent_in_relative_mode_stays_reachable():
+    failures, largest = random_ik_failures("relative")
+    assert failures <= 2  # at most 10 % of 20 random actions (0 measured)
+    assert largest < 0.5  # no flip to another arm posture
+    absolute_failures, _ = random_ik_failures("absolute")
+    assert absolute_failures >= 10  # what the absolute 2 m box gives a random agent
+
+
+def test_a_relative_action_moves_the_commanded_pose_by_its_scale_and_stays_in_the_workspace():
+    env = make().unwrapped
+    try:
+        env.reset(seed=1)
+        start = env.relative_target(np.zeros(6))
+        moved = env.relative_target(np.array([1.0, -0.5, 0.0, 0.0, 0.0, 0.0]))
+        assert moved[:3] - start[:3] == pytest.approx([RELATIVE_SCALE.translation_m, -0.5 * RELATIVE_SCALE.translation_m, 0.0])
+        assert moved[3:] == pytest.approx(start[3:])
+        for _ in range(60):  # one second straight up: stops at the workspace's ceiling
+            obs, *_ = env.step(np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0], dtype=np.float32))
+        assert env.relative_target(np.zeros(6))[2] == pytest.approx(WORKSPACE[1][2])
+        assert abs(obs["ee_pose"][2] - WORKSPACE[1][2]) < 0.02
+    finally:
+        env.close()
+
+
+def test_reset_and_step_infos_carry_the_scoop_and_spill_metrics():
+    env = make()
+    try:
+        _, info = env.reset(seed=2)
+        keys = {"spilled", "scooped", "in_spoon", "spoon_coverage", "scoop_success", "spillage"}
+        assert keys <= set(info["metrics"]) and info["metrics"]["spilled"] == 0
+        *_, info = env.step(np.zeros(6, dtype=np.float32))
+        assert keys <= set(info["metrics"]) and info["metrics"]["n_particles"] == env.unwrapped.metrics()["n_particles"]
+    finally:
+        env.close()
+
+
+def test_the_vector_env_example_steps_two_envs_without_an_ik_failure():
+    import runpy
+    from pathlib import Path
+
+    example = runpy.run_path(str(Path(__file__).parents[2] / "examples" / "gym_vector_env.py"))
+    result = example["run"](n_envs=2, steps=5, food=FOOD, level=LEVEL)
+    assert result["spilled"].shape == result["scooped"].shape == (2,)
+    assert list(result["ik_failures"]) == [0, 0]
