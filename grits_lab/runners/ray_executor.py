@@ -31,6 +31,7 @@ from ray.exceptions import GetTimeoutError, RayActorError, RayError
 
 from grits_lab.errors import GritsError
 from grits_lab.runners.base import Executor
+from grits_lab.runners.local_ray import make_token_private
 from grits_lab.runners.spec import EpisodeResult, EpisodeSpec
 from grits_lab.runners.work import WorkerContext, execute_spec
 
@@ -130,6 +131,7 @@ class RayExecutor(Executor):
                 # "local": always a fresh Ray of our own, even if a stale address file of an
                 # earlier `ray start` is left in the temp dir.
                 ray.init(address="local", num_cpus=num_cpus or os.cpu_count() or 1, **kwargs)
+                make_token_private()  # what listens where, and why: grits_lab/runners/local_ray.py
             self._owns_ray = True
         cluster_cpus = float(ray.cluster_resources().get("CPU", 0.0))
         fit = int(math.floor(cluster_cpus / cpus_per_worker + 1e-9))
