@@ -14,6 +14,7 @@ from typing import Any, Literal
 from grits_lab.config import config_from_dict, load_yaml, merge_mappings, require
 from grits_lab.sampling.guidance import GuidanceConfig, PostHocConfig
 from grits_lab.errors import ConfigError
+from grits_lab.evaluation.custom_methods import CustomMethodConfig
 from grits_lab.evaluation.grid import EpisodeGrid
 from grits_lab.perception.composite import CloudConfig
 from grits_lab.policies.control import ScoopSettings
@@ -127,16 +128,24 @@ class EvaluationConfig(EpisodeGrid):
     # held-out set on which `grits-lab compare-predictors --eval` scores predictors on what the
     # policy really does.
     rollout_chunks: bool = False
+    # Controllers a lab brings (grits_lab/evaluation/custom_methods.py): name -> the class and its options.
+    custom_methods: dict[str, CustomMethodConfig] = field(default_factory=dict)
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)
 
     def __post_init__(self) -> None:
+        from grits_lab.evaluation.custom_methods import controller_class, registered_methods
         from grits_lab.evaluation.methods import METHODS
 
         super().__post_init__()
         require(bool(self.run_id.strip()), "run_id", self.run_id, "a non-empty name")
         require(len(self.methods) >= 1, "methods", self.methods, "a non-empty list")
+        for name in self.custom_methods:
+            require(name not in METHODS, "custom_methods", name, "a name no built-in method has")
+        custom = registered_methods(self.custom_methods)
         for m in self.methods:
-            require(m in METHODS, "methods", m, f"one of {', '.join(METHODS)}")
+            require(m in METHODS or m in custom, "methods", m, f"one of {', '.join([*METHODS, *custom])}")
+            if m in custom:
+                controller_class(m, custom[m])  # imported now: a wrong name fails at load
         require(len(set(self.methods)) == len(self.methods), "methods", self.methods, "without repeats")
         require(self.num_threads >= 1, "num_threads", self.num_threads, "at least 1")
         require(self.flush_every >= 1, "flush_every", self.flush_every, "at least 1")

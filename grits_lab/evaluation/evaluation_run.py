@@ -29,7 +29,7 @@ from grits_lab.evaluation.evaluation_config import EvaluationConfig, load_evalua
 from grits_lab.evaluation.task_episode import evaluation_episode
 from grits_lab.evaluation.grid import EpisodeKey
 from grits_lab.evaluation.methods import (
-    METHODS, check_method_checkpoints, file_digest, guidance_columns, method_checkpoints,
+    METHODS, check_method_checkpoints, file_digest, guidance_columns, method_checkpoints, method_spec,
 )
 from grits_lab.io import ensure_writable_dir, save_parquet_atomic, write_json_atomic, write_text_atomic
 from grits_lab.records import RECORD_COLUMNS
@@ -194,7 +194,7 @@ def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], diges
         "started (UTC)": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S"),
         "code git commit": git_commit(),
         "config fingerprint": config_fingerprint(config),
-        "methods": {m: {"description": METHODS[m].description, "checkpoints": {k: {"path": p, "sha256_16": digests[p]} for k, p in paths[m].items()},
+        "methods": {m: {"description": method_spec(m, config).description, "checkpoints": {k: {"path": p, "sha256_16": digests[p]} for k, p in paths[m].items()},
                         "rho_s": list(guidance_columns(m, config))} for m in config.methods},
         "guidance": config_to_dict(config.guidance),
         "posthoc": config_to_dict(config.posthoc),

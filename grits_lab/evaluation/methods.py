@@ -46,8 +46,22 @@ METHODS: dict[str, MethodSpec] = {
 }
 
 
+def method_spec(name: str, config: EvaluationConfig | None = None) -> MethodSpec:
+    """The spec of a built-in method, or of a registered controller (`config.custom_methods`, or an
+    entry point: grits_lab/evaluation/custom_methods.py), which needs no checkpoint of ours.
+    KeyError for a name neither knows."""
+    from grits_lab.evaluation.custom_methods import registered_methods
+
+    if name in METHODS:
+        return METHODS[name]
+    custom = registered_methods(config.custom_methods if config is not None else None)[name]
+    return MethodSpec("custom", (), description=custom.description or custom.controller)
+
+
 def method_checkpoints(name: str, checkpoints: CheckpointPaths) -> dict[str, str]:
     """{key: path} of the files `name` needs; a missing or unset one is a ConfigError naming it."""
+    if name not in METHODS:
+        return {}  # a registered controller loads its own files
     spec = METHODS[name]
     out = {}
     for key in spec.checkpoints:
@@ -77,7 +91,7 @@ def file_digest(path: str | Path) -> str:
 
 def guidance_columns(name: str, config: EvaluationConfig) -> tuple[float, int]:
     """(rho, s) recorded for a method: NaN / -1 for methods without guidance."""
-    spec = METHODS[name]
+    spec = method_spec(name, config)
     if spec.sampler == "guided":
         return float(config.guidance.rho), int(config.guidance.s)
     if spec.sampler == "posthoc":
@@ -90,7 +104,11 @@ def build_controller(name: str, config: EvaluationConfig, paths: dict[str, str],
     """The scoop controller of method `name`; `cache(key, factory)` keeps loaded models per worker."""
     from grits_lab.evaluation import controllers
 
-    spec = METHODS[name]
+    spec = method_spec(name, config)
+    if spec.kind == "custom":
+        from grits_lab.evaluation.custom_methods import build_custom_controller, registered_methods
+
+        return build_custom_controller(name, registered_methods(config.custom_methods)[name])
     if spec.kind == "rule_based":
         from grits_lab.policies.rule_based import RuleBasedController
 
@@ -144,8 +162,8 @@ def check_method_checkpoints(name: str, paths: dict[str, str]) -> None:
                     n_action_steps = config_from_dict(DiffusionPolicyConfig, state["config"]).n_action_steps
                 except (ConfigError, KeyError, TypeError):
                     raise ConfigError(f"`checkpoints.policy` is not a diffusion policy checkpoint: {path}") from None
-    spec = METHODS[name]
-    if spec.predictor is None:
+    spec = METHODS.get(name)
+    if spec is None or spec.predictor is None:
         return
     from grits_lab.data.format import CHUNK_KEY, with_chunk_key
     from grits_lab.spillage.predictor_checkpoint import read_checkpoint

@@ -324,7 +324,7 @@ def evaluation_episode(spec: EpisodeSpec, context: WorkerContext) -> dict[str, A
     """Work function (grits_lab/runners): one evaluation episode in a worker; models cached per worker."""
     import torch
 
-    from grits_lab.evaluation.methods import METHODS, build_controller, guidance_columns
+    from grits_lab.evaluation.methods import build_controller, guidance_columns, method_spec
     from grits_lab.perception.env_clouds import builder_for_env
     from grits_lab.sim.env import worker_env
 
@@ -342,7 +342,7 @@ def evaluation_episode(spec: EpisodeSpec, context: WorkerContext) -> dict[str, A
     record.update({
         "run_id": p.run_id, "method": p.method, "food": spec.food, "split": p.split, "level": spec.level,
         "trial": p.trial, "seed": spec.seed, "rho": rho, "s": s, "error": "",
-        "guidance_step": config.guidance.step if METHODS[p.method].sampler == "guided" else "",
+        "guidance_step": config.guidance.step if method_spec(p.method, config).sampler == "guided" else "",
         "wall_time_s": time.perf_counter() - start,
         **{f"checkpoint_{k}": d for k, d in p.digests.items()},
     })

@@ -1,0 +1,102 @@
+"""Methods a lab brings without editing the package: a controller class named in the evaluation
+config, or published by an installed package under the `grits_lab.methods` entry point group.
+
+In the evaluation YAML:
+
+    methods: [dp, my_policy]
+    custom_methods:
+      my_policy:
+        controller: my_lab.controllers:MyController   # or path/to/file.py:MyController
+        options: {weights: models/my_policy.pt}       # keyword arguments of MyController(...)
+        description: our MLP policy
+
+Or in the lab's own pyproject.toml (the method is then known to every config):
+
+    [project.entry-points."grits_lab.methods"]
+    my_policy = "my_lab.controllers:MyController"
+
+The class implements the controller protocol of grits_lab/policies/control.py (`cloud_steps`,
+`reset(scene)`, `plan(history, scene) -> Chunk | None`); each worker builds one instance per
+episode with `options` as keyword arguments. The class is imported when the config loads, so a
+misspelled module or class stops the command at once, naming `custom_methods.<name>.controller`.
+A config entry wins over an entry point of the same name; a built-in method's name, or a class
+inside grits_lab, is refused (the package's own methods are wired by name in methods.py).
+examples/torch_controller.py wraps a plain torch policy this way.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from dataclasses import dataclass, field
+from importlib.metadata import EntryPoint, entry_points
+from pathlib import Path
+from typing import Any
+
+from grits_lab.errors import ConfigError
+
+ENTRY_POINT_GROUP = "grits_lab.methods"
+PROTOCOL = ("cloud_steps", "reset", "plan")
+
+
+@dataclass
+class CustomMethodConfig:
+    """One registered method: `controller` "module:Class" or "file.py:Class", its keyword options."""
+
+    controller: str
+    options: dict[str, Any] = field(default_factory=dict)
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        module, _, name = self.controller.rpartition(":")
+        if not module or not name.isidentifier():
+            raise ConfigError(f"`controller` must be 'package.module:ClassName' or 'path/to/file.py:ClassName'. Got {self.controller!r}.")
+
+
+def registered_methods(custom: dict[str, CustomMethodConfig] | None = None) -> dict[str, CustomMethodConfig]:
+    """The entry points of installed packages, then `custom` (a config's `custom_methods`) over them."""
+    found = {ep.name: CustomMethodConfig(ep.value, description=f"entry point {ep.value}") for ep in entry_points(group=ENTRY_POINT_GROUP)}
+    return {**found, **(custom or {})}
+
+
+def controller_class(method: str, spec: CustomMethodConfig) -> type:
+    """Import the class `spec.controller` names; ConfigError naming the key when it cannot, or when
+    the class lacks a part of the controller protocol."""
+    key = f"custom_methods.{method}.controller"
+    target, _, name = spec.controller.rpartition(":")
+    if target.split(".")[0] == "grits_lab":
+        raise ConfigError(f"`{key}`: {spec.controller!r} is inside grits_lab, whose methods are listed by name in `methods`")
+    try:
+        # An entry point's own loader: a config entry and an installed one resolve the same way.
+        cls = getattr(_load_file(target), name) if target.endswith(".py") else EntryPoint(method, spec.controller, ENTRY_POINT_GROUP).load()
+    except (ImportError, AttributeError, FileNotFoundError) as exc:
+        raise ConfigError(f"`{key}`: cannot import {spec.controller!r} ({exc})") from None
+    missing = [attr for attr in PROTOCOL if not hasattr(cls, attr)]
+    if missing:
+        raise ConfigError(f"`{key}`: {spec.controller} lacks {', '.join(missing)} of the controller protocol "
+                          "(grits_lab/policies/control.py)")
+    return cls
+
+
+def build_custom_controller(method: str, spec: CustomMethodConfig) -> Any:
+    """A fresh controller of a registered method: its class called with `options`."""
+    try:
+        return controller_class(method, spec)(**spec.options)
+    except TypeError as exc:
+        raise ConfigError(f"`custom_methods.{method}.options`: {exc}") from None
+
+
+def _load_file(path: str) -> Any:
+    """A module from a .py file, registered under a name made from its resolved path, so a
+    second load (another episode in the same worker) returns the same module."""
+    resolved = Path(path).resolve()
+    if not resolved.is_file():
+        raise FileNotFoundError(f"no file {resolved}")
+    name = "grits_lab_custom_" + "_".join(resolved.with_suffix("").parts[1:]).replace("-", "_").replace(".", "_")
+    if name in sys.modules:
+        return sys.modules[name]
+    loader = importlib.util.spec_from_file_location(name, resolved)
+    module = importlib.util.module_from_spec(loader)
+    sys.modules[name] = module
+    loader.loader.exec_module(module)
+    return module
