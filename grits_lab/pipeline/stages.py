@@ -282,7 +282,8 @@ def _run_sweep(stage: str, config: Any, layout: Layout, progress: bool) -> dict[
 def _run_report(stage: str, data: Any, layout: Layout, progress: bool) -> dict[str, Any]:
     from grits_lab.report.build import build_report
 
-    result = build_report(data["run_dir"], data["output_dir"])
+    training = [d for d in (layout.policy_dir, layout.bc_dir, layout.predictor_root) if d.is_dir()]
+    result = build_report(data["run_dir"], data["output_dir"], training=training)
     return {"output_dir": str(result.out_dir), "files": len(result.files), "missing": list(result.missing)}
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import sys
 import time
+from pathlib import Path
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -228,7 +229,7 @@ def _train(
         train_set_ids = set(train_ids)
         pairs = [(r.food, r.level) for r in load_index(config.dataset).itertuples() if r.episode_id in train_set_ids]
         player = rollouts(rollout, rollout_episodes(pairs, rollout.episodes, config.seed))  # type: ignore[misc]
-    logger = MetricLogger(out, resume_step=step) if lead else None
+    logger = MetricLogger(out, resume_step=step, title=f"{desc} {Path(out).name}") if lead else None
     first_loss = last_loss = float("nan")
     window: list[float] = []
     started = time.perf_counter()

@@ -66,7 +66,8 @@ def default_out_dir(run_dir: str | Path) -> Path:
 
 
 def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also: Sequence[str | Path] = (),
-                 videos: int = 0, replay: Callable[..., Any] | None = None, progress: bool = False) -> ReportResult:
+                 videos: int = 0, replay: Callable[..., Any] | None = None, progress: bool = False,
+                 training: Sequence[str | Path] = ()) -> ReportResult:
     """Write the report of RUN_DIR into `out_dir` (default RUN_DIR/report).
 
     also: further run directories whose episode records are reported beside RUN_DIR's (a method
@@ -77,12 +78,15 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also
     replays one recorded episode into a video (`grits_lab.report.replay.replay_episode`).
     With videos = 0 (the default) nothing is replayed and no simulator is needed. progress: a
     bar on stderr while the videos are replayed.
+
+    training: training run directories (policy, BC, predictor) whose `curves.png` files, found up
+    to two folders deep, are shown in a "Training" section with each run's last logged values.
     """
     out = Path(out_dir) if out_dir is not None else default_out_dir(run_dir)
     run = load_run(run_dir, exclude=out, also=also)
     ensure_writable_dir(out)
     result = ReportResult(out)
-    sections = _results_sections(run, out, result) + [_provenance_section(run, out, result)]
+    sections = _results_sections(run, out, result) + _training_sections(training, out, result) + [_provenance_section(run, out, result)]
     if videos > 0 and run.episodes is not None:
         if replay is None:
             raise ValueError("videos > 0 needs a replay function")
@@ -175,6 +179,27 @@ def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Sec
             items.append(_figure("sweep_front", "Sweep: objectives of completed trials", "Red: Pareto front; star: the paper's defaults.", front, result))
         sections.append(Section(f"Sweep summary ({run.trials_file})", items))
     return sections
+
+
+def _training_sections(dirs: Sequence[str | Path], out: Path, result: ReportResult) -> list[Section]:
+    """One figure per training run: its curves (drawn by the run's MetricLogger), copied into figures/."""
+    import pandas as pd
+
+    items: list[Any] = []
+    for root in map(Path, dirs):
+        for curves in sorted(p for pattern in ("curves.png", "*/curves.png", "*/*/curves.png") for p in root.glob(pattern)):
+            run = curves.parent
+            name = "_".join(run.relative_to(root.parent).parts)
+            copy = out / "figures" / f"training_{name}.png"
+            copy.parent.mkdir(parents=True, exist_ok=True)
+            copy.write_bytes(curves.read_bytes())
+            last = pd.read_csv(run / "metrics.csv").ffill().iloc[-1] if (run / "metrics.csv").is_file() else None
+            shown = "" if last is None else "Last logged step {}: {}.".format(
+                int(last["step"]), ", ".join(f"{k} {last[k]:.4g}" for k in last.index if k != "step" and pd.notna(last[k])
+                                             and (k.endswith("loss") or k.startswith("val_") or k.startswith("rollout_"))))
+            items.append(_figure(f"training_{name}", f"Training: {run}", f"Loss, learning rate and validation metrics "
+                                 f"per step (an epoch for the predictor), from {run / 'metrics.csv'}. {shown}", copy, result))
+    return [Section("Training", items)] if items else []
 
 
 def _videos_section(run: RunData, out: Path, per_food: int, replay: Callable[..., Any], result: ReportResult,

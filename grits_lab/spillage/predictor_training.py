@@ -30,6 +30,7 @@ from grits_lab.spillage.predictor_checkpoint import TrainedPredictor, read_check
 from grits_lab.spillage.predictor_config import PredictorConfig
 from grits_lab.spillage.chunk_dataset import CLOUD_KEYS, SpillageChunkDataset, check_spillage_dataset, fit_normalizers, split_spillage_episodes
 from grits_lab.spillage.classifier_metrics import classification_report
+from grits_lab.training.metrics_log import MetricLogger
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
 from grits_lab.training.metrics_log import require_finite_loss
 
@@ -106,6 +107,7 @@ def train_predictor(config: PredictorConfig, restart: bool = False, progress: bo
     val_set = SpillageChunkDataset(dataset_dir, split.val, shuffle=False, **common)
     n_train = len(train_set.labels())
 
+    logger = MetricLogger(out, resume_step=start_epoch, title=f"predictor {out.name}")  # one step per epoch
     for epoch in range(start_epoch, config.train.epochs):
         torch.manual_seed(derive_seed(config.train.seed, "dropout", epoch))
         train_set.set_epoch(epoch)
@@ -140,6 +142,7 @@ def train_predictor(config: PredictorConfig, restart: bool = False, progress: bo
             save_predictor(best_path, **ckpt, extra=extra)
         save_predictor(last_path, **ckpt, extra=extra)
         write_json_atomic(out / "history.json", history)
+        logger.log(epoch + 1, {**{k: v for k, v in row.items() if k != "epoch"}, "lr": optimizer.param_groups[0]["lr"]})
         if progress:
             print(
                 f"epoch {epoch + 1}/{config.train.epochs}  loss {loss_tr:.4f}/{loss_va:.4f}  "
@@ -147,6 +150,7 @@ def train_predictor(config: PredictorConfig, restart: bool = False, progress: bo
                 f"ece {row['val_ece']:.3f}  ({row['seconds']:.1f}s){'  *' if improved else ''}",
                 flush=True,
             )
+    logger.close()
     best = min(history, key=lambda r: r["val_loss"] if config.train.select_metric == "val_loss" else -r["val_auroc"]) if history else {}
     return {"run_dir": str(out), "best_checkpoint": str(best_path), "last_checkpoint": str(last_path), "best_epoch": best}
 

@@ -1,4 +1,8 @@
-"""Training logs as CSV (one row per logged step, readable with pandas) and TensorBoard when installed.
+"""Training logs: one metric logger for the policy, BC and the predictor.
+
+Every logged step is a row of `metrics.csv` (readable with pandas), a scalar in TensorBoard when
+it is installed (`pip install -e ".[tensorboard]"`; `tensorboard --logdir RUN_DIR/tensorboard`),
+and on close the run's curves are drawn to `curves.png` (grits_lab/training/curves.py).
 
 The CSV is appended to, so a resumed run continues the same file; rows past the resume step
 (written after the last checkpoint by the interrupted run) are dropped on reopening, so the log
@@ -16,7 +20,15 @@ from grits_lab.errors import GritsError
 
 
 class MetricLogger:
-    def __init__(self, directory: str | Path, resume_step: int = 0, tensorboard: bool = True) -> None:
+    """`log(step, {name: value})` to metrics.csv (and TensorBoard); `close()` draws curves.png.
+
+    Names: `train_loss`, `val_loss`, `lr` and any `val_*` / `rollout_*` metric are drawn on the
+    curves' loss, learning-rate and validation panels; a step is an optimizer step for the
+    policy and BC, an epoch for the predictor.
+    """
+
+    def __init__(self, directory: str | Path, resume_step: int = 0, tensorboard: bool = True, title: str = "") -> None:
+        self.title = title
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
         self.path = self.directory / "metrics.csv"
@@ -50,9 +62,13 @@ class MetricLogger:
             for key, value in values.items():
                 self.writer.add_scalar(key, value, step)
 
-    def close(self) -> None:
+    def close(self) -> Path | None:
+        """Close TensorBoard and draw the curves; returns curves.png (None: nothing logged)."""
+        from grits_lab.training.curves import CURVES_FILE, plot_curves
+
         if self.writer is not None:
             self.writer.close()
+        return plot_curves(self.path, self.directory / CURVES_FILE, self.title)
 
     def _rewrite(self, rows: list[dict[str, Any]]) -> None:
         with open(self.path, "w", newline="") as fh:

@@ -96,6 +96,7 @@ def test_train_writes_logs_and_checkpoint_round_trip_gives_identical_actions(dem
     assert summary["steps"] == 20 and summary["val_episodes"] == 1
     log = pd.read_csv(tmp_path / "run" / "metrics.csv")
     assert list(log["step"]) == [5, 10, 15, 20] and log["val_loss"].notna().sum() == 2
+    assert (tmp_path / "run" / "curves.png").stat().st_size > 0
     a = DiffusionPolicy.load(summary["checkpoint"])
     b = DiffusionPolicy.load(summary["checkpoint"])
     ds = DemoWindowDataset(demo_dataset, ["ep001"], a.config, cache_points_per_object=32, progress=False)

@@ -231,3 +231,20 @@ def test_fig5_labels_sit_clear_of_the_papers_diamonds():
     for diamond in diamonds:
         box = diamond.get_window_extent(renderer)
         assert not any(_overlap(box, t.get_window_extent(renderer)) for t in labels)
+
+
+def test_the_training_section_shows_each_runs_curves_and_last_values(tmp_path):
+    from grits_lab.training import MetricLogger
+
+    plausible_run(0).to_parquet(tmp_path / "episodes.parquet", index=False)
+    for name, metrics in {"policy": {"train_loss": 0.5, "lr": 1e-4, "val_loss": 0.6},
+                          "predictor/predictor": {"train_loss": 0.4, "lr": 1e-3, "val_auroc": 0.74}}.items():
+        logger = MetricLogger(tmp_path / "train" / name, tensorboard=False)
+        logger.log(1, metrics)
+        logger.close()
+    result = build_report(tmp_path, tmp_path / "report", training=[tmp_path / "train" / "policy", tmp_path / "train" / "predictor"])
+    html = (result.out_dir / "report.html").read_text()
+    section = html.split("<h2>Training</h2>", 1)[1].split("</section>", 1)[0]
+    assert section.count("<img") == 2 and "val_auroc 0.74" in section and "val_loss 0.6" in section
+    assert (result.out_dir / "figures" / "training_predictor_predictor.png").is_file()
+    assert "<h2>Training</h2>" not in (build_report(tmp_path, tmp_path / "plain").out_dir / "report.html").read_text()

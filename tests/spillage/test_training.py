@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+
+import pandas as pd
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +40,10 @@ def test_overfits_a_tiny_set(tmp_path, tiny_dataset):
     assert history[-1]["train_accuracy"] == 1.0
     assert history[-1]["train_loss"] < 0.1 < history[0]["train_loss"]
     assert result["best_epoch"]["val_loss"] == min(r["val_loss"] for r in history)
+    # The same metric logger as the policy's: one row per epoch, and the curves drawn on close.
+    log = pd.read_csv(tmp_path / "runs" / "tiny" / "metrics.csv")
+    assert list(log["step"]) == list(range(1, 61)) and list(log["val_auroc"]) == [r["val_auroc"] for r in history]
+    assert log["lr"].iloc[0] == 3e-3 and (tmp_path / "runs" / "tiny" / "curves.png").stat().st_size > 0
 
 
 def test_checkpoint_round_trip(tmp_path, tiny_dataset):

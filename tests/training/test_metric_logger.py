@@ -1,0 +1,36 @@
+"""The one metric logger: CSV rows per step, a resumed run continues its file, curves drawn on close."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from grits_lab.training import MetricLogger
+from grits_lab.training.curves import curve_panels
+
+
+def test_close_draws_loss_learning_rate_and_validation_panels(tmp_path):
+    logger = MetricLogger(tmp_path, tensorboard=False)
+    for step in range(1, 6):
+        logger.log(step, {"train_loss": 1.0 / step, "lr": 1e-3, "steps_per_s": 9.0})
+    logger.log(6, {"train_loss": 0.1, "lr": 1e-3, "val_loss": 0.2, "val_auroc": 0.74})
+    png = logger.close()
+    assert png == tmp_path / "curves.png" and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    frame = pd.read_csv(tmp_path / "metrics.csv")
+    assert curve_panels(frame) == [("loss", ["train_loss", "val_loss"]), ("learning rate", ["lr"]),
+                                   ("validation and rollout metrics", ["val_auroc"])]
+
+
+def test_a_resumed_run_drops_the_steps_after_its_checkpoint(tmp_path):
+    first = MetricLogger(tmp_path, tensorboard=False)
+    for step in (1, 2, 3):
+        first.log(step, {"train_loss": float(step)})
+    first.close()
+    resumed = MetricLogger(tmp_path, resume_step=2, tensorboard=False)
+    resumed.log(3, {"train_loss": 30.0})
+    resumed.close()
+    frame = pd.read_csv(tmp_path / "metrics.csv")
+    assert list(frame["step"]) == [1, 2, 3] and frame["train_loss"].iloc[-1] == 30.0
+
+
+def test_nothing_logged_draws_nothing(tmp_path):
+    assert MetricLogger(tmp_path, tensorboard=False).close() is None and not (tmp_path / "curves.png").exists()
