@@ -8,8 +8,12 @@ submits plain Ray tasks). Episodes are pure CPU, one thread each, so one actor p
 right size; the driver only waits and writes files.
 
 Faults. A spec whose actor dies (kill -9, node lost, out of memory) is re-run from its seed on a
-replacement actor, up to `max_attempts` runs; a spec whose work function raises comes back as a
-failed result with its error (the worker catches it), and the job goes on.
+live actor, up to `max_attempts` runs, and a replacement actor is started; work goes only to
+actors that have answered. A replacement that the cluster cannot place (its node is gone and no
+CPU is left for it) is given up after `replace_timeout_s`, or at once when the cluster's CPUs
+already show it, and the pool shrinks to the actors that remain, with one line saying so. A spec
+whose work function raises comes back as a failed result with its error (the worker catches it),
+and the job goes on.
 
 Where Ray runs: an explicit `address`, else the RAY_ADDRESS environment variable, else a local
 Ray started here and sized to the machine. If Ray is already initialized in this process (tests,
@@ -47,7 +51,7 @@ _LOST_WORKER = (RayActorError, ActorUnavailableError)
 
 def _connect(address: str, kwargs: dict[str, Any]) -> None:
     """ray.init on an existing cluster, with one clear line when that fails."""
-    from grits_lab.runners.executor_config import check_reachable
+    from grits_lab.runners.executor_config import check_reachable, token_refusal
 
     check_reachable(address)  # Ray retries an unreachable address for minutes
     try:
@@ -59,10 +63,7 @@ def _connect(address: str, kwargs: dict[str, Any]) -> None:
             chain.append(f"{type(cause).__name__}: {cause}".lower())
             cause = cause.__cause__ or cause.__context__
         if any("authentication" in c or "auth token" in c for c in chain):
-            raise GritsError(
-                f"the Ray cluster at {address} requires token authentication: set RAY_AUTH_MODE=token and "
-                "make its token available (`ray get-auth-token` on the head; ~/.ray/auth_token or RAY_AUTH_TOKEN)"
-            ) from None
+            raise GritsError(token_refusal(address)) from None
         raise GritsError(f"cannot connect to the Ray cluster at {address}: {text.splitlines()[0]}") from None
 
 
@@ -92,6 +93,8 @@ class _Slot:
     actor: Any
     generation: int
     in_flight: int = 0
+    ready_ref: Any = None  # a replacement's first answer, awaited; None: the actor has answered
+    started: float = 0.0  # when a replacement was started (time.monotonic)
 
 
 class RayExecutor(Executor):
@@ -106,6 +109,8 @@ class RayExecutor(Executor):
     max_attempts: runs of a spec before a lost worker marks it failed.
     runtime_env: passed to ray.init when connecting (e.g. {"working_dir": "."} for a cluster whose
         nodes do not have grits_lab installed).
+    replace_timeout_s: how long a replacement for a lost actor may wait for a CPU before the pool
+        shrinks instead.
     """
 
     def __init__(
@@ -118,6 +123,7 @@ class RayExecutor(Executor):
         max_attempts: int = 3,
         runtime_env: dict[str, Any] | None = None,
         startup_timeout_s: float = 120.0,
+        replace_timeout_s: float = 30.0,
     ):
         self._owns_ray = False
         if not ray.is_initialized():
@@ -146,13 +152,14 @@ class RayExecutor(Executor):
         self.cpus_per_worker = cpus_per_worker
         self.max_in_flight_per_worker = max(1, int(max_in_flight_per_worker))
         self.max_attempts = max(1, int(max_attempts))
+        self.replace_timeout_s = float(replace_timeout_s)
         self._actor_cls = ray.remote(_EpisodeWorker)
-        self._slots = [self._start_actor(i, 0) for i in range(self.num_workers)]
+        self._slots: list[_Slot | None] = [self._start_actor(i, 0) for i in range(self.num_workers)]
         self._queue: collections.deque[tuple[EpisodeSpec, int]] = collections.deque()
         self._in_flight: dict[Any, tuple[int, int, EpisodeSpec, int]] = {}
         self._ready_results: list[EpisodeResult] = []
         try:
-            ray.get([s.actor.pid.remote() for s in self._slots], timeout=startup_timeout_s)
+            ray.get([s.actor.pid.remote() for s in self._live()], timeout=startup_timeout_s)
         except GetTimeoutError:
             self.close()
             raise GritsError(
@@ -164,13 +171,17 @@ class RayExecutor(Executor):
         actor = self._actor_cls.options(num_cpus=self.cpus_per_worker, max_restarts=0).remote(index)
         return _Slot(actor=actor, generation=generation)
 
+    def _live(self) -> list[_Slot]:
+        """Actors that have answered (work goes only to them)."""
+        return [s for s in self._slots if s is not None and s.ready_ref is None]
+
     def worker_pids(self) -> list[int]:
         """Process ids of the current actors (for monitoring, and for fault-injection tests)."""
-        return ray.get([s.actor.pid.remote() for s in self._slots])
+        return ray.get([s.actor.pid.remote() for s in self._live()])
 
     def worker_peak_rss_mb(self) -> list[float]:
         """Peak resident memory of each current actor (MB)."""
-        return ray.get([s.actor.peak_rss_mb.remote() for s in self._slots])
+        return ray.get([s.actor.peak_rss_mb.remote() for s in self._live()])
 
     def submit(self, spec: EpisodeSpec) -> None:
         self._queue.append((spec, 1))
@@ -185,6 +196,8 @@ class RayExecutor(Executor):
 
     def _dispatch(self) -> None:
         for index, slot in enumerate(self._slots):
+            if slot is None or slot.ready_ref is not None:
+                continue
             while self._queue and slot.in_flight < self.max_in_flight_per_worker:
                 spec, attempt = self._queue.popleft()
                 ref = slot.actor.run.remote(spec)
@@ -193,15 +206,22 @@ class RayExecutor(Executor):
 
     def poll(self, timeout: float | None = None) -> list[EpisodeResult]:
         results, self._ready_results = self._ready_results, []
-        if results or not self._in_flight:
+        if results or not (self._in_flight or self._queue):
             return results
-        ready, _ = ray.wait(list(self._in_flight), num_returns=len(self._in_flight), timeout=0)
+        waiting = {s.ready_ref: i for i, s in enumerate(self._slots) if s is not None and s.ready_ref is not None}
+        refs = list(self._in_flight) + list(waiting)
+        if not refs:
+            return results
+        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=0)
         if not ready:
-            ready, _ = ray.wait(list(self._in_flight), num_returns=1, timeout=timeout)
+            ready, _ = ray.wait(refs, num_returns=1, timeout=self._wait_bound(timeout))
         for ref in ready:
+            if ref in waiting:
+                self._replacement_answered(waiting[ref], ref)
+                continue
             index, generation, spec, attempt = self._in_flight.pop(ref)
             slot = self._slots[index]
-            if slot.generation == generation:
+            if slot is not None and slot.generation == generation:
                 slot.in_flight -= 1
             try:
                 result: EpisodeResult = ray.get(ref)
@@ -222,21 +242,72 @@ class RayExecutor(Executor):
             result.spec = spec
             result.attempts = attempt
             results.append(result)
+        self._give_up_unplaced_replacements()
         self._dispatch()
         return results
 
+    def _wait_bound(self, timeout: float | None) -> float | None:
+        """`timeout`, shortened to the moment the oldest awaited replacement is given up."""
+        deadlines = [s.started + self.replace_timeout_s - time.monotonic() for s in self._slots if s is not None and s.ready_ref is not None]
+        if not deadlines:
+            return timeout
+        bound = max(0.0, min(deadlines)) + 0.01
+        return bound if timeout is None else min(timeout, bound)
+
     def _replace_actor(self, index: int, generation: int) -> None:
         slot = self._slots[index]
-        if slot.generation != generation:
-            return  # already replaced when another of its specs came back
+        if slot is None or slot.generation != generation:
+            return  # already replaced (or given up) when another of its specs came back
         try:
             ray.kill(slot.actor, no_restart=True)
         except Exception:  # already gone
             pass
-        self._slots[index] = self._start_actor(index, generation + 1)
+        others = sum(1 for s in self._slots if s is not None) - 1
+        fit = int(math.floor(float(ray.cluster_resources().get("CPU", 0.0)) / self.cpus_per_worker + 1e-9))
+        if others >= fit and others > 0:  # the cluster already shows fewer CPUs: no room for a replacement
+            self._shrink(index, f"the cluster has {fit * self.cpus_per_worker:g} CPUs left")
+            return
+        replacement = self._start_actor(index, generation + 1)
+        replacement.ready_ref = replacement.actor.pid.remote()
+        replacement.started = time.monotonic()
+        self._slots[index] = replacement
+
+    def _replacement_answered(self, index: int, ref: Any) -> None:
+        slot = self._slots[index]
+        try:
+            ray.get(ref)
+        except RayError:  # lost before it ever ran (its node went away too)
+            self._shrink(index, "its replacement was lost before it started")
+            return
+        slot.ready_ref = None
+
+    def _give_up_unplaced_replacements(self) -> None:
+        now = time.monotonic()
+        late = [i for i, s in enumerate(self._slots) if s is not None and s.ready_ref is not None and now - s.started >= self.replace_timeout_s]
+        if late:
+            self._shrink(late, f"no CPU took a replacement within {self.replace_timeout_s:g} s")
+
+    def _shrink(self, indices: list[int] | int, reason: str) -> None:
+        """Drop these slots for good, with one line; the specs queued go to the actors that remain."""
+        indices = [indices] if isinstance(indices, int) else indices
+        for index in indices:
+            slot = self._slots[index]
+            if slot is not None:
+                try:
+                    ray.kill(slot.actor, no_restart=True)
+                except Exception:
+                    pass
+            self._slots[index] = None
+        self.num_workers = sum(1 for s in self._slots if s is not None)
+        if self.num_workers == 0:
+            raise GritsError(f"every Ray worker was lost ({reason}); rerun the job to resume it when the cluster has CPUs again")
+        lost = f"{len(indices)} Ray workers were" if len(indices) > 1 else "a Ray worker was"
+        log.warning("%s lost and not replaced (%s): continuing with %d workers", lost, reason, self.num_workers)
 
     def close(self) -> None:
         for slot in getattr(self, "_slots", []):
+            if slot is None:
+                continue
             try:
                 ray.kill(slot.actor, no_restart=True)
             except Exception:

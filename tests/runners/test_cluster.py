@@ -100,6 +100,36 @@ def test_collection_runs_unchanged_on_the_cluster(ray_head, tmp_path):
     assert len(list((tmp_path / "spill" / "episodes").glob("*.npz"))) == 2
 
 
+def _collect_config(tmp_path, address, episodes=2):
+    import yaml
+
+    config = {
+        "kind": "spillage", "output_dir": str(tmp_path / "spill"), "episodes": episodes, "spill_fraction": 0.0, "shapes": ["sphere"],
+        "particles": {"fill_height": [0.005, 0.005]}, "cloud": {"n_points": 64, "cad_surface_samples": 500},
+        "sim": {"cameras": [{"name": "front", "eye": [1.05, -0.15, 0.55], "target": [0.5, -0.1, 0.03], "width": 64, "height": 48}]},
+        "executor": {"address": address},
+    }
+    path = tmp_path / "cluster.yaml"
+    path.write_text(yaml.safe_dump(config))
+    return path
+
+
+@pytest.mark.parametrize("token, says", [
+    (None, "requires token authentication and this client sent no token"),
+    ("0123456789abcdef0123456789abcdef", "rejected the token from RAY_AUTH_TOKEN: it is not this cluster's token"),
+])
+def test_a_missing_or_wrong_token_is_refused_in_one_line_before_the_dataset_exists(ray_head, tmp_path, token, says):
+    env = dict(os.environ, RAY_USAGE_STATS_ENABLED="0")
+    env.pop("RAY_AUTH_MODE", None)
+    if token is not None:
+        env.update(RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=token)
+    proc = subprocess.run(["grits-lab", "collect", str(_collect_config(tmp_path, ray_head)), "--no-progress"],
+                          env=env, capture_output=True, text=True, timeout=200)
+    err = [line for line in proc.stderr.strip().splitlines() if not line.startswith("pybullet build time")]  # printed by its import
+    assert proc.returncode == 2 and len(err) == 1 and says in err[0], proc.stderr[-2000:]
+    assert not (tmp_path / "spill").exists()
+
+
 def test_client_without_token_gets_one_clear_error(ray_head):
     code = """
 from grits_lab.errors import GritsError
@@ -113,3 +143,84 @@ except GritsError as exc:
     env.pop("RAY_AUTH_MODE", None)
     proc = subprocess.run([sys.executable, "-c", code.replace("ADDRESS", ray_head)], env=env, capture_output=True, text=True, timeout=200)
     assert f"ERR the Ray cluster at {ray_head} requires token authentication" in proc.stdout, proc.stdout + proc.stderr[-2000:]
+
+
+README = os.path.join(os.path.dirname(__file__), "..", "..", "README.md")
+
+
+def _readme_cluster_steps():
+    """The README's "Scaling out" step 1 (commands) and step 2's environment, as a user reads them."""
+    text = open(README).read().split("## Scaling out", 1)[1].split("```bash", 1)[1].split("```", 1)[0]
+    step1 = text.split("# 1.", 1)[1].split("# 2.", 1)[0].splitlines()[1:]
+    commands = [line.split("#", 1)[0].strip() for line in step1 if line.split("#", 1)[0].strip()]
+    exports = [line for line in text.split("# 2.", 1)[1].splitlines() if line.startswith("export ")]
+    env = dict(item.split("=", 1) for line in exports for item in line.split()[1:])
+    return commands, env
+
+
+@pytest.fixture
+def two_nodes(tmp_path):
+    """A head and a worker node on this machine, started with the README's step-1 commands as written
+    (the head given a free port, 1 CPU, its own temp dir; the worker 2 CPUs). Yields (address, env, worker pgid)."""
+    import tempfile
+
+    commands, env_vars = _readme_cluster_steps()
+    port = _free_port()
+    temp_dir = tempfile.mkdtemp(prefix="rn", dir="/tmp")  # short: Ray's socket paths must fit 107 bytes
+    groups, env = [], dict(os.environ, RAY_USAGE_STATS_ENABLED="0")
+    env.pop("RAY_AUTH_MODE", None)  # the README's lines say where it is needed
+    try:
+        for command in commands:
+            line = command.replace("HEAD_IP", "127.0.0.1").replace("6379", str(port))
+            if "--head" in line:
+                line += f" --num-cpus=1 --include-dashboard=false --disable-usage-stats --temp-dir={temp_dir}"
+            elif "ray start" in line:
+                line += " --num-cpus=2 --disable-usage-stats"
+            proc = subprocess.Popen(["bash", "-c", line], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+            out, _ = proc.communicate(timeout=120)
+            groups.append(proc.pid)
+            assert proc.returncode == 0, f"README step 1 failed: {line}\n{out.decode()[-2000:]}"
+        client_env = dict(env, **{k: v.replace("HEAD_IP", "127.0.0.1").replace("6379", str(port)) for k, v in env_vars.items()})
+        yield f"127.0.0.1:{port}", client_env, groups[-1]
+    finally:
+        for group in reversed(groups):
+            for sig in (signal.SIGTERM, signal.SIGKILL):
+                try:
+                    os.killpg(group, sig)
+                except ProcessLookupError:
+                    break
+                time.sleep(1)
+        try:
+            with open("/tmp/ray/ray_current_cluster") as fh:
+                if fh.read().strip().endswith(f":{port}"):
+                    os.remove("/tmp/ray/ray_current_cluster")
+        except OSError:
+            pass
+        subprocess.run(["rm", "-rf", temp_dir])
+
+
+def test_a_collection_finishes_when_a_node_is_lost_following_the_readme_steps(two_nodes, tmp_path):
+    """The field's case: `grits-lab collect` of 16 spillage trials on two nodes, the second node killed
+    mid-way: the lost trial is re-run on the head's worker and the job ends, in bounded time."""
+    address, env, worker_group = two_nodes
+    assert env["RAY_AUTH_MODE"] == "token" and env["RAY_ADDRESS"] == address
+    config = _collect_config(tmp_path, None, episodes=16)
+    text = config.read_text().replace("address: null", "address: null\n  replace_timeout_s: 5")
+    config.write_text(text)
+    started = time.monotonic()
+    proc = subprocess.Popen(["grits-lab", "collect", str(config), "--no-progress"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    episodes = tmp_path / "spill" / "episodes"
+    while proc.poll() is None and len(list(episodes.glob("*.npz"))) < 3:
+        time.sleep(0.2)
+    os.killpg(worker_group, signal.SIGKILL)  # the worker node's raylet and its agents
+    killed_at = time.monotonic()
+    try:
+        out, err = proc.communicate(timeout=150)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err[-3000:]
+    assert len(list(episodes.glob("*.npz"))) == 16
+    print(f"killed after {killed_at - started:.1f} s, finished {time.monotonic() - killed_at:.1f} s later")
+    assert "re-running it from its seed" in err and "not replaced (" in err and "continuing with 1 workers" in err, err[-3000:]
