@@ -170,6 +170,6 @@ def demo_episode(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "target_bowl_y": float(env.target_bowl_pose()[1, 3]),
         "spilled_any": bool(metrics["spilled"] > 0),
         **{k: v for k, v in metrics.items() if isinstance(v, (bool, int, float, str)) or v is None},
-        **{f"spilled_{k}": int(v) for k, v in metrics["spill_mechanisms"].items()},
+        **metrics["spill_attribution"],
     }
     return {"arrays": arrays, "meta": meta}

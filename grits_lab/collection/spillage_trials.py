@@ -430,6 +430,6 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "mass": float(component.get("mass_mean", 0.0)),
         "friction": float(component.get("lateral_friction_mean", 0.0)),
         "min_visible_food_points": int(min(visible)) if visible else -1,
-        **{f"spilled_{k}": int(v) for k, v in metrics["spill_mechanisms"].items()},
+        **metrics["spill_attribution"],
     }
     return {"arrays": arrays, "meta": meta}

@@ -9,6 +9,7 @@ import yaml
 
 from grits_lab.data.format import EPISODE_DIR, MANIFEST_FILE, load_index, rebuild_index
 from grits_lab.errors import StorageError
+from grits_lab.sim.spill_metrics import attribution_columns
 
 
 def dataset_summary(path: str | Path) -> dict[str, Any]:
@@ -46,14 +47,9 @@ def dataset_summary(path: str | Path) -> dict[str, Any]:
             f"{food}/{level}": f"scoop success {int(g['scoop_success'].sum())}/{len(g)}, spilled {int(g['spilled_any'].sum())}/{len(g)}"
             for (food, level), g in index.groupby(["food", "level"], sort=True)
         }
-    mechanisms = [c for c in index.columns if c.startswith("spilled_") and c != "spilled_any"]
-    if mechanisms and len(index):
-        total = float(index[mechanisms].to_numpy().sum())
-        out["spill_mechanisms"] = {
-            c.removeprefix("spilled_"): f"{int(index[c].sum())} particles ({index[c].sum() / total:.0%}) in {int((index[c] > 0).sum())} episodes"
-            if total else "0 particles"
-            for c in mechanisms
-        }
+    attribution = attribution_summary(index)
+    if attribution:
+        out["spills_by_stage_and_cause"] = attribution
     summary = manifest.get("summary") or {}
     short = _short_of(summary, out)
     if out["status"] == "complete" and short:
@@ -61,6 +57,19 @@ def dataset_summary(path: str | Path) -> dict[str, Any]:
     if "acceptance_rate" in summary:
         out["acceptance_rate"] = summary["acceptance_rate"]
     return out
+
+
+def attribution_summary(rows: Any) -> dict[str, str]:
+    """Spilled particles summed over `rows` (a DataFrame of records) per stage and cause that has any:
+    {"<stage> / <cause>": "<particles> particles (<share>) in <episodes> episodes"}; {} without spills
+    or without the `spilled_<stage>_<cause>` columns (grits_lab.sim.spill_metrics)."""
+    columns = {c: sc for c, sc in attribution_columns().items() if c in rows.columns}
+    if not columns or not len(rows):
+        return {}
+    counts = rows[list(columns)].fillna(0).astype(int)
+    total = int(counts.to_numpy().sum())
+    return {f"{stage} / {cause}": f"{int(counts[c].sum())} particles ({counts[c].sum() / total:.0%}) in {int((counts[c] > 0).sum())} episodes"
+            for c, (stage, cause) in columns.items() if counts[c].sum() > 0}
 
 
 def format_summary(summary: dict[str, Any]) -> str:

@@ -1,4 +1,4 @@
-"""The learned methods' scoop controllers (dp, dp_post, the GRITS variants, bc) and the episode's observation history.
+"""The learned methods' scoop controllers (dp, dp_post, the GRITS variants, bc), the scripted expert's, and the episode's observation history.
 
 They follow the controller protocol of grits_lab/policies/control.py, as the baselines in
 grits_lab/policies do. `scene` (grits_lab/evaluation/episode_scene.py) gives read access to the cameras
@@ -21,7 +21,7 @@ from grits_lab.seeding import derive_seed
 if TYPE_CHECKING:  # annotations only
     from grits_lab.evaluation.episode_scene import EpisodeScene
 
-__all__ = ["BCController", "Chunk", "DiffusionController", "LearnedController", "ObsHistory", "is_still"]
+__all__ = ["BCController", "Chunk", "DiffusionController", "ExpertController", "LearnedController", "ObsHistory", "is_still"]
 
 
 class ObsHistory:
@@ -169,3 +169,29 @@ class BCController(LearnedController):
         start = time.perf_counter()
         actions = self.policy.predict_action(self.observation(history))
         return Chunk(actions, {}, time.perf_counter() - start)
+
+
+class ExpertController:
+    """The scripted expert's scoop, the demonstrations' own (grits_lab/sim/expert.py), randomized from
+    the episode's seed exactly as `grits-lab collect` draws a demonstration's: an oracle scoop for
+    measuring the stages after it (experiments/oracle_transfer.yaml). Plays it whole, then done."""
+
+    cloud_steps = 0
+    image_steps = 0
+
+    def __init__(self) -> None:
+        self.done = False
+
+    def reset(self, scene: EpisodeScene) -> None:
+        self.done = False
+
+    def plan(self, history: ObsHistory, scene: EpisodeScene) -> Chunk | None:
+        from grits_lab.seeding import make_rng
+        from grits_lab.sim.expert import expert_trajectory
+
+        if self.done:
+            return None
+        self.done = True
+        env = scene.env
+        actions = expert_trajectory(env.scene(), make_rng(derive_seed(scene.seed, "expert")), env.config.control_hz)
+        return Chunk(actions=np.asarray(actions, dtype=np.float32))

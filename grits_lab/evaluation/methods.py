@@ -35,6 +35,7 @@ class MethodSpec:
 
 
 METHODS: dict[str, MethodSpec] = {
+    "expert": MethodSpec("expert", (), description="the scripted expert's scoop (the demonstrations' own): an oracle for the stages after it"),
     "rule_based": MethodSpec("rule_based", (), description="centre, measure food height, dig 5 cm, fixed scoop"),
     "bc": MethodSpec("bc", ("bc",), description="behavior cloning: encoder features -> MLP -> actions"),
     "scone": MethodSpec("scone", ("demos",), description="SCONE-style: probe, then a scoop conditioned on the probe"),
@@ -109,6 +110,8 @@ def build_controller(name: str, config: EvaluationConfig, paths: dict[str, str],
         from grits_lab.evaluation.custom_methods import build_custom_controller, registered_methods
 
         return build_custom_controller(name, registered_methods(config.custom_methods)[name])
+    if spec.kind == "expert":
+        return controllers.ExpertController()
     if spec.kind == "rule_based":
         from grits_lab.policies.rule_based import RuleBasedController
 

@@ -189,14 +189,18 @@ def summarize_guidance(diagnostics: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings) -> dict[str, Any]:
-    """Stages 2 and 3: locate the target, carry the spoon level, pour, settle; returns the measurements.
+    """Stages 2 and 3: locate the target, lift, carry the spoon level, pour, settle; returns the measurements.
 
-    Besides the metrics: "ik_failures" (actions of the transfer and pour whose pose the arm could
-    not reach) and "max_joint_step_rad" (the largest change of a commanded joint angle in one
-    action, rad; the Panda moves at most 0.22-0.26 rad per 0.1 s action, and the flips to another
-    arm posture that throw a load measured 0.6-1.7 rad); "plan" (the option taken, transfer.py
-    `TransferOption.describe`), "reachable" (whether the reach check passed; None unchecked) and
-    "checks" (paths checked before moving).
+    Each action runs under its stage's name (`ScoopEnv.set_stage`: lift, carry, pour, after_pour),
+    so every particle spilled is attributed to the stage that lost it. Besides the metrics:
+    "ik_failures" (actions of the transfer and pour whose pose the arm could not reach),
+    "max_joint_step_rad" (the largest change of a commanded joint angle in one action, rad) and
+    "max_joint_speed_ratio" (the largest over that joint's Panda velocity limit: above 1 no Panda
+    could follow; the flips to another arm posture that throw a load measured 0.6-1.7 rad, 3-8x);
+    "plan" (the option taken, transfer.py `TransferOption.describe`), "reachable" (whether the
+    reach check passed; None unchecked), "checks" (options checked before moving), "spilled_by_stage"
+    (spilled count at the end of each stage), "carry_peak_speed_mps" / "carry_peak_accel_mps2"
+    (of the spoon's commanded path in the lift and carry, from its per-action differences).
     """
     target = locate_bowl(scene.object_points("target_bowl"))
     truth = np.asarray(env.target_bowl_pose(), dtype=np.float64)[:3, 3]
@@ -212,37 +216,46 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     max_step = settings.max_speed / env.config.control_hz
     # The robot's base stands at the world origin (grits_lab/sim/world.py): radial = away from it.
     heading = math.atan2(target.centre[1], target.centre[0]) if settings.heading == "radial" else None
-    check = env.check_path if settings.reach_check else None
+    check = (lambda actions: env.check_path(actions, rest_pull=False)) if settings.reach_check else None
     plan = choose_transfer(current, target, obstacles, settings, max_step, reach, heading, check)
-    path = plan.path
-    ik_failures, joint_steps = 0, [0.0]
+    ik_failures, joint_steps, speed_ratios = 0, [0.0], [0.0]
+    spilled_by_stage: dict[str, int] = {}
 
-    def step(action: np.ndarray) -> None:
+    def step(action: np.ndarray, stage: str) -> None:
         nonlocal ik_failures
+        if env.tracker.stage != stage:
+            spilled_by_stage[env.tracker.stage] = int(env.metrics()["spilled"])
+            env.set_stage(stage)
         info = env.step(action)[4]
         ik_failures += int(info["ik_failure"])
         joint_steps.append(float(info["joint_step"]))
+        speed_ratios.append(float(info["joint_speed_ratio"]))
         scene.advance()
 
-    for action in path:
-        step(action)
-    spilled_after_transfer = int(env.metrics()["spilled"])
-    pour = plan.pour
-    for action in pour:
-        step(action)
+    for action, stage in zip(plan.actions, plan.stages):
+        step(action, stage)
     for _ in range(settings.settle_steps):
-        step(pour[-1])
+        step(plan.actions[-1], "after_pour")
+    metrics = env.metrics()
+    spilled_by_stage[env.tracker.stage] = int(metrics["spilled"])
+    moving = np.array([a for a, stage in zip(plan.actions, plan.stages) if stage != "pour"], dtype=np.float64)
+    velocity = np.diff(np.concatenate([current[None, :3], moving[:, :3]]), axis=0) * env.config.control_hz
+    accel = np.diff(np.concatenate([np.zeros((1, 3)), velocity, np.zeros((1, 3))]), axis=0) * env.config.control_hz
     return {
         "ik_failures": ik_failures,
         "max_joint_step_rad": max(joint_steps),
-        "metrics": env.metrics(),
-        "spilled_after_transfer": spilled_after_transfer,
+        "max_joint_speed_ratio": max(speed_ratios),
+        "metrics": metrics,
+        "spilled_by_stage": spilled_by_stage,
         "target_locate_error_m": float(np.linalg.norm(target.centre[:2] - truth[:2])),
         "target_fit_residual_m": target.residual,
-        "transfer_steps": int(len(path) + len(pour) + settings.settle_steps),
+        "transfer_steps": int(len(plan.actions) + settings.settle_steps),
+        "pour_steps": plan.n_pour,
         "plan": plan.option.describe(),
         "reachable": plan.reachable if plan.n_checks else None,
         "checks": plan.n_checks,
+        "carry_peak_speed_mps": float(np.linalg.norm(velocity, axis=1).max()) if len(velocity) else 0.0,
+        "carry_peak_accel_mps2": float(np.linalg.norm(accel, axis=1).max()) if len(accel) else 0.0,
     }
 
 
@@ -282,6 +295,8 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         "scoop_steps": scoop["scoop_steps"],
         "scoop_stop_reason": scoop["stop_reason"],
         "ik_failures": int(m["ik_failures"]),
+        "scoop_max_joint_speed_ratio": float(m["max_joint_speed_ratio"]),
+        "above_spoon_rim": int(m["above_spoon_rim"]),
         "n_plans": scoop["n_plans"],
         "plan_time_mean_s": scoop["plan_time_mean_s"],
         "plan_time_max_s": scoop["plan_time_max_s"],
@@ -290,8 +305,9 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
     }
     transferred, spilled_total, transfer_time, final = 0, int(m["spilled"]), 0.0, m
     record.update({"target_locate_error_m": math.nan, "target_fit_residual_m": math.nan, "spilled_transfer": 0,
-                   "transfer_ik_failures": 0, "transfer_max_joint_step_rad": math.nan,
-                   "transfer_plan": "", "transfer_reachable": None, "transfer_checks": 0})
+                   "transfer_ik_failures": 0, "transfer_max_joint_step_rad": math.nan, "transfer_max_joint_speed_ratio": math.nan,
+                   "transfer_plan": "", "transfer_reachable": None, "transfer_checks": 0, "pour_steps": 0,
+                   "carry_peak_speed_mps": math.nan, "carry_peak_accel_mps2": math.nan})
     if config.transfer.enabled and m["scooped"] > 0:
         t0 = time.perf_counter()
         tr = run_transfer(env, scene, config.transfer)
@@ -302,7 +318,9 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         record.update({"target_locate_error_m": tr["target_locate_error_m"], "target_fit_residual_m": tr["target_fit_residual_m"],
                        "spilled_transfer": max(0, spilled_total - int(m["spilled"])),
                        "transfer_ik_failures": tr["ik_failures"], "transfer_max_joint_step_rad": tr["max_joint_step_rad"],
-                       "transfer_plan": tr["plan"], "transfer_reachable": tr["reachable"], "transfer_checks": tr["checks"]})
+                       "transfer_max_joint_speed_ratio": tr["max_joint_speed_ratio"], "pour_steps": tr["pour_steps"],
+                       "transfer_plan": tr["plan"], "transfer_reachable": tr["reachable"], "transfer_checks": tr["checks"],
+                       "carry_peak_speed_mps": tr["carry_peak_speed_mps"], "carry_peak_accel_mps2": tr["carry_peak_accel_mps2"]})
     needed = 1 if env.food.success_rule == "items" else max(1, math.ceil(0.5 * int(m["scooped"])))
     record.update({
         "transferred": transferred,
@@ -311,7 +329,8 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         "renders": scene.renders,
         "task_success": bool(m["scoop_success"]) and transferred >= needed and spilled_total == 0,
     })
-    record.update({f"spilled_{k}": int(v) for k, v in final["spill_mechanisms"].items()})
+    record["delivered_fraction"] = transferred / int(m["scooped"]) if int(m["scooped"]) else math.nan
+    record.update(final["spill_attribution"])
     if record_chunks:
         n_exec = config.scoop.n_action_steps or getattr(controller, "n_action_steps", None) or 12
         record["_chunks"] = rollout_chunk_episode(scoop["chunks"], int(n_exec), {

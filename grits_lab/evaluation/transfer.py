@@ -29,7 +29,7 @@ import numpy as np
 
 from grits_lab.errors import InputError
 from grits_lab.geometry import matrix_to_rot6d, rot6d_to_matrix
-from grits_lab.sim.env import interpolate_pose
+from grits_lab.sim.env import interpolate_pose, pose9_to_matrix
 
 
 @dataclass
@@ -81,14 +81,33 @@ def _pose(position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
     return np.concatenate([position, matrix_to_rot6d(rotation)]).astype(np.float32)
 
 
+def min_jerk(n: int) -> np.ndarray:
+    """(n,) fractions of a rest-to-rest move after each of n equal time steps, on the minimum-jerk
+    profile s(u) = 10u^3 - 15u^4 + 6u^5 (Flash & Hogan 1985): zero velocity and acceleration at
+    both ends, peak speed 1.875x the mean, peak acceleration 5.77 L / T^2."""
+    u = np.arange(1, n + 1) / n
+    return 10 * u**3 - 15 * u**4 + 6 * u**5
+
+
+MIN_JERK_PEAK_SPEED = 1.875  # peak over mean speed of `min_jerk`
+
+
 def _line(a: np.ndarray, b: np.ndarray, rotation: np.ndarray, max_step: float, end_rotation: np.ndarray | None = None,
-          min_steps: int = 1) -> list[np.ndarray]:
-    """Waypoints from a to b (a excluded) at most `max_step` apart (and at least `min_steps` of them),
-    turning from `rotation` to `end_rotation` (slerp) on the way when it is given."""
-    n = max(min_steps, int(math.ceil(np.linalg.norm(b - a) / max_step)))
+          min_steps: int = 1, profile: str = "constant") -> list[np.ndarray]:
+    """Waypoints from a to b (a excluded), one per action, turning from `rotation` to `end_rotation`
+    (slerp) on the way when it is given, in at least `min_steps` actions.
+
+    profile "constant": equal steps of at most `max_step` (a jump from rest to full speed in one
+    action); "min_jerk": rest to rest on the minimum-jerk profile with a peak step of at most
+    `max_step` (the time-parameterization a motion planner gives a robot).
+    """
+    length = float(np.linalg.norm(b - a))
+    peak = MIN_JERK_PEAK_SPEED if profile == "min_jerk" else 1.0
+    n = max(min_steps, int(math.ceil(peak * length / max_step)))
+    fractions = min_jerk(n) if profile == "min_jerk" else np.arange(1, n + 1) / n
     m0, m1 = np.eye(4), np.eye(4)
     m0[:3, :3], m1[:3, :3] = rotation, rotation if end_rotation is None else end_rotation
-    return [_pose(a + (b - a) * (i / n), interpolate_pose(m0, m1, i / n)[:3, :3]) for i in range(1, n + 1)]
+    return [_pose(a + (b - a) * f, interpolate_pose(m0, m1, f)[:3, :3]) for f in fractions]
 
 
 @dataclass
@@ -112,13 +131,16 @@ def path_is_clear(path: np.ndarray, obstacles: list[Obstacle], spoon_reach: floa
 
 def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], clearance: float,
                   pour_height: float, max_step: float, spoon_reach: float, level_steps: int = 1,
-                  target_heading: float | None = None, level_yaw_offset: float = 0.0, pour_offset: float = 0.0) -> np.ndarray:
+                  target_heading: float | None = None, level_yaw_offset: float = 0.0, pour_offset: float = 0.0,
+                  profile: str = "constant") -> np.ndarray:
     """(T, 9) spoon path: up to a safe height while levelling over `level_steps` actions, across, down to
-    `pour_height` above the target's rim, level from the end of the lift on.
+    `pour_height` above the target's rim (negative: into the bowl), level from the end of the lift on.
+    The first `lift_length(path)` actions are the lift (they rise straight up); the rest the carry.
 
     level_yaw_offset: radians the level spoon's heading is turned from the scoop's during the lift;
     pour_offset: metres the pour point moves from the target's centre away from the robot's base
-    (at the world origin), which the arm reaches more easily for bowls close to it.
+    (at the world origin), which the arm reaches more easily for bowls close to it; profile: each
+    straight segment's time-parameterization (`_line`). InputError when the path would cross an obstacle.
     """
     rotation = level_rotation(current)
     if level_yaw_offset:
@@ -131,11 +153,11 @@ def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
     above_target = np.array([centre[0], centre[1], safe_z])
     pour_point = np.array([centre[0], centre[1], target.rim_height + pour_height])
     tipped = rot6d_to_matrix(np.asarray(current[3:9], dtype=np.float64))
-    waypoints = _line(start, np.array([start[0], start[1], safe_z]), tipped, max_step, rotation, level_steps)
+    waypoints = _line(start, np.array([start[0], start[1], safe_z]), tipped, max_step, rotation, level_steps, profile)
     lifted = len(waypoints) - 1  # the vertical lift leaves the source bowl by design
     arrival = rotation if target_heading is None else heading_rotation(target_heading)
-    waypoints += _line(waypoints[-1][:3].astype(np.float64), above_target, rotation, max_step, arrival)
-    waypoints += _line(above_target, pour_point, arrival, max_step)
+    waypoints += _line(waypoints[-1][:3].astype(np.float64), above_target, rotation, max_step, arrival, profile=profile)
+    waypoints += _line(above_target, pour_point, arrival, max_step, profile=profile)
     path = np.stack(waypoints)
     # The lift starts in the source bowl and the descent ends in the target's cylinder by design:
     # check the way between them.
@@ -145,15 +167,58 @@ def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
     return path
 
 
-def pour_motion(pose: np.ndarray, angle_deg: float, steps: int) -> np.ndarray:
-    """(steps, 9) roll the spoon about its own x axis by `angle_deg`, in place."""
+def pour_motion(pose: np.ndarray, angle_deg: float, steps: int, profile: str = "constant") -> np.ndarray:
+    """(steps, 9) roll the spoon about its own x axis by `angle_deg`, in place, in `steps` actions
+    (profile: "constant" equal increments, "min_jerk" from rest to rest, `min_jerk`)."""
     rot = rot6d_to_matrix(np.asarray(pose[3:9], dtype=np.float64))
+    fractions = min_jerk(steps) if profile == "min_jerk" else np.arange(1, steps + 1) / steps
     out = []
-    for i in range(1, steps + 1):
-        a = math.radians(angle_deg) * i / steps
+    for f in fractions:
+        a = math.radians(angle_deg) * f
         roll = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
         out.append(_pose(np.asarray(pose[:3], dtype=np.float64), rot @ roll))
     return np.stack(out)
+
+
+def slow_to_limits(start: np.ndarray, actions: np.ndarray, stages: list[str], check: Callable[[np.ndarray], Any],
+                   max_slowdown: int, rounds: int = 3) -> tuple[np.ndarray, list[str], Any, bool]:
+    """Slow a motion until no action asks a joint to move faster than the Panda can.
+
+    start: (9,) the pose before the first action; actions: (T, 9); stages: (T,) each action's stage
+    name; check: `ScoopEnv.check_path`. Every stage holding an action whose `speed_ratios` entry
+    exceeds 1 is slowed as a whole by k = ceil(its largest ratio): each of its actions is cut into
+    k actions on the same pose path, so the stage takes k times as long and keeps its velocity
+    profile's shape (a min-jerk segment still starts and ends at rest). The motion is checked again,
+    up to `rounds` times. A stage that would need more than `max_slowdown` times its planned
+    duration holds a change of arm posture, which slowing cannot remove.
+    Returns (actions, stages, the last check's answer, whether every action is within the limits).
+    """
+    slowdown = {stage: 1 for stage in stages}
+    answer = check(actions)
+    for _ in range(rounds):
+        over = answer.speed_ratios > 1.0 + 1e-9
+        if not over.any():
+            return actions, stages, answer, True
+        factor = {stage: 1 for stage in slowdown}
+        for i in np.flatnonzero(over):
+            factor[stages[i]] = max(factor[stages[i]], int(math.ceil(answer.speed_ratios[i] * 1.05)))
+        if any(slowdown[st] * k > max_slowdown for st, k in factor.items()):
+            return actions, stages, answer, False
+        new_actions, new_stages, previous = [], [], pose9_to_matrix(start)
+        for action, stage in zip(actions, stages):
+            target = pose9_to_matrix(action)
+            k = factor[stage]
+            new_actions += [_pose(*_split(interpolate_pose(previous, target, j / k))) for j in range(1, k + 1)]
+            new_stages += [stage] * k
+            previous = target
+        slowdown = {st: slowdown[st] * factor[st] for st in slowdown}
+        actions, stages = np.stack(new_actions), new_stages
+        answer = check(actions)
+    return actions, stages, answer, not bool((answer.speed_ratios > 1.0 + 1e-9).any())
+
+
+def _split(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return m[:3, 3], m[:3, :3]
 
 
 @dataclass(frozen=True)
@@ -172,14 +237,22 @@ class TransferOption:
 
 @dataclass
 class TransferPlan:
-    """The chosen transfer: path (T, 9) up to the pour point, pour (P, 9), the option that made them,
-    whether the check passed (`reachable`), how many options were checked (`n_checks`, 0 unchecked)."""
+    """The chosen transfer: actions (T, 9) from the lift to the end of the pour, stages (T,) each
+    action's stage ("lift", "carry", "pour"), the option that made them, whether the check passed
+    (`reachable`: no unreachable pose after the first, no joint faster than the Panda's limit, or
+    over `max_joint_step` without slowing), how many paths were checked (`n_checks`, 0 unchecked),
+    and the largest joint speed ratio of the actions (`max_speed_ratio`, NaN unchecked)."""
 
-    path: np.ndarray
-    pour: np.ndarray
+    actions: np.ndarray
+    stages: list[str]
     option: TransferOption
     reachable: bool
     n_checks: int
+    max_speed_ratio: float = math.nan
+
+    @property
+    def n_pour(self) -> int:
+        return sum(stage == "pour" for stage in self.stages)
 
 
 def transfer_options(settings: Any) -> list[TransferOption]:
@@ -199,42 +272,62 @@ def transfer_options(settings: Any) -> list[TransferOption]:
     return out
 
 
+def option_motion(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], settings: Any, max_step: float,
+                  spoon_reach: float, target_heading: float | None, option: TransferOption) -> tuple[np.ndarray, list[str]]:
+    """The actions (T, 9) of one option, lift to pour, and each action's stage."""
+    path = plan_transfer(current, target, obstacles, settings.clearance, option.pour_height, max_step, spoon_reach,
+                         option.level_steps, target_heading, math.radians(option.level_yaw_deg), option.pour_offset,
+                         settings.profile)
+    pour = pour_motion(path[-1], settings.pour_angle_deg, settings.pour_steps, settings.profile)
+    lift = lift_length(path)
+    stages = ["lift"] * lift + ["carry"] * (len(path) - lift) + ["pour"] * len(pour)
+    return np.concatenate([path, pour]), stages
+
+
 def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], settings: Any, max_step: float,
                     spoon_reach: float, target_heading: float | None,
                     check: Callable[[np.ndarray], Any] | None) -> TransferPlan:
-    """Plan the transfer and pour, checked for reach when `check` is given.
+    """Plan the transfer and pour, checked for reach (and slowed to the Panda's joint limits) when
+    `check` is given.
 
     check(actions (T, 9)) -> a `PathCheck` (grits_lab.sim.env.ScoopEnv.check_path): per action,
-    whether the arm cannot reach it and how far it steps a joint (rad). An option passes when no
-    action steps a joint more than `settings.max_joint_step` and none after the first is
+    whether the arm cannot reach it and how fast it moves its joints. With `settings.slow_to_limits`
+    each option is first slowed (`slow_to_limits`) until no action moves a joint faster than the
+    Panda's velocity limit; it passes when that succeeds and no action after the first is
     unreachable (the first starts from the scoop's last command, which the arm may have stopped
-    short of). The first option (`transfer_options`) that passes is taken; a lift that fails
-    before the spoon leaves the vertical lift skips its other pours. After `settings.max_checks`
-    checks without a pass, the option with the smallest joint step (no smaller than the limit),
-    then the fewest unreachable actions, is taken, with `reachable` False.
+    short of). Without it, an option passes when no action steps a joint more than
+    `settings.max_joint_step` rad. The first option (`transfer_options`) that passes is taken; a lift
+    that fails while rising skips its other pours. After `settings.max_checks` options without a
+    pass, the one with the smallest joint step, then the fewest unreachable actions, is taken,
+    with `reachable` False.
     """
     best: tuple[tuple[float, int], TransferPlan] | None = None
     n_checks, failed_lift = 0, None
     for option in transfer_options(settings):
         if failed_lift == (option.level_steps, option.level_yaw_deg):
             continue
-        path = plan_transfer(current, target, obstacles, settings.clearance, option.pour_height, max_step, spoon_reach,
-                             option.level_steps, target_heading, math.radians(option.level_yaw_deg), option.pour_offset)
-        pour = pour_motion(path[-1], settings.pour_angle_deg, settings.pour_steps)
+        actions, stages = option_motion(current, target, obstacles, settings, max_step, spoon_reach, target_heading, option)
         if check is None:
-            return TransferPlan(path, pour, option, reachable=True, n_checks=0)
-        answer = check(np.concatenate([path, pour]))
+            return TransferPlan(actions, stages, option, reachable=True, n_checks=0)
         n_checks += 1
-        bad = answer.unreachable.copy()
-        bad[0] = False
-        bad |= answer.joint_steps > settings.max_joint_step
-        plan = TransferPlan(path, pour, option, not bad.any(), n_checks)
+        if settings.slow_to_limits:
+            actions, stages, answer, within = slow_to_limits(current, actions, stages, check, settings.max_slowdown)
+            bad = answer.speed_ratios > 1.0 + 1e-9 if not within else np.zeros(len(actions), dtype=bool)
+            key_step = float(answer.speed_ratios.max())
+        else:
+            answer = check(actions)
+            bad = answer.joint_steps > settings.max_joint_step
+            key_step = max(float(answer.joint_steps.max()), settings.max_joint_step)
+        unreachable = answer.unreachable.copy()
+        unreachable[0] = False
+        bad = bad | unreachable
+        plan = TransferPlan(actions, stages, option, not bad.any(), n_checks, float(answer.speed_ratios.max()))
         if plan.reachable:
             return plan
-        key = (max(float(answer.joint_steps.max()), settings.max_joint_step), int(answer.unreachable[1:].sum()))
+        key = (key_step, int(answer.unreachable[1:].sum()))
         if best is None or key < best[0]:
             best = (key, plan)
-        if int(np.argmax(bad)) < _lift_length(path):
+        if stages[int(np.argmax(bad))] == "lift":
             failed_lift = (option.level_steps, option.level_yaw_deg)
         if n_checks >= settings.max_checks:
             break
@@ -243,7 +336,7 @@ def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[O
     return best[1]
 
 
-def _lift_length(path: np.ndarray) -> int:
+def lift_length(path: np.ndarray) -> int:
     """Actions at the start of `path` that rise straight up from where the spoon was."""
     xy = path[0, :2]
     n = 0

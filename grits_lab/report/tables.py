@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import pandas as pd
 
 from grits_lab.records import OUTCOME_COLUMNS
+from grits_lab.sim.spill_metrics import SPILL_STAGES, attribution_columns
 from grits_lab.intervals import Rate, format_percent, format_rate, rate
 from grits_lab.report.vocabulary import (
     ABLATION_METHODS,
@@ -404,6 +405,18 @@ def failure_table(episodes: pd.DataFrame | None) -> ReportTable:
                 k = int(mask.astype(bool).sum())
                 shown[label] = f"{k}/{n}"
                 data[f"{key}_k"] = k
+        attributed = all(c in rows.columns for c in attribution_columns())
+        if attributed:  # the transfer's spills split by the stage that lost them (episodes with a spill there)
+            parts = []
+            for stage in SPILL_STAGES[1:]:
+                columns = [c for c, (st, _) in attribution_columns().items() if st == stage]
+                lost = rows[columns].apply(pd.to_numeric, errors="coerce").fillna(0).sum(axis=1) > 0
+                k = int((lost & ~rows["is_error"]).sum())
+                data[f"spill_{stage}_k"] = k
+                parts.append(f"{stage.replace('_', ' ')} {k}")
+            shown["Spills after the scoop, by stage"] = " · ".join(parts)
+        else:
+            shown["Spills after the scoop, by stage"] = MISSING
         recorded = {"transfer_ik_failures", "transfer_max_joint_step_rad"} <= set(rows.columns)
         if recorded:
             ik = pd.to_numeric(rows["transfer_ik_failures"], errors="coerce")
@@ -411,8 +424,11 @@ def failure_table(episodes: pd.DataFrame | None) -> ReportTable:
         if recorded and transfers.any():
             k = int(((ik > 0) & transfers).sum())
             n_transfers = int(transfers.sum())
-            step = pd.to_numeric(rows["transfer_max_joint_step_rad"], errors="coerce")
-            flips = int(((step > POSTURE_FLIP_RAD) & transfers).sum())
+            if "transfer_max_joint_speed_ratio" in rows.columns and pd.to_numeric(rows["transfer_max_joint_speed_ratio"], errors="coerce")[transfers].notna().all():
+                flips = int(((pd.to_numeric(rows["transfer_max_joint_speed_ratio"], errors="coerce") > 1.0) & transfers).sum())
+            else:  # records made before the Panda's limits were recorded
+                step = pd.to_numeric(rows["transfer_max_joint_step_rad"], errors="coerce")
+                flips = int(((step > POSTURE_FLIP_RAD) & transfers).sum())
             shown["Transfers with an unreachable pose"] = f"{k}/{n_transfers}"
             shown["Posture flips"] = f"{flips}/{n_transfers}"
             data.update({"transfer_unreachable_k": k, "posture_flip_k": flips, "transfers": n_transfers})
@@ -440,9 +456,11 @@ def failure_table(episodes: pd.DataFrame | None) -> ReportTable:
         "action whose pose the arm could not reach (`transfer_ik_failures`); the IK may then find the pose in "
         "another arm posture, and the flip throws the load. The first action of a checked transfer may be one: it "
         "starts from the scoop's last command, which the arm may have stopped short of.",
-        f"Posture flips: transfers in which a commanded joint moved more than {POSTURE_FLIP_RAD} rad in one 0.1 s "
-        "action (`transfer_max_joint_step_rad`; the Panda moves at most 0.22-0.26 rad, and the flips measured "
-        "0.5-1.8 rad).",
+        "Posture flips: transfers in which a commanded joint moved faster than the Panda's velocity limit "
+        "(`transfer_max_joint_speed_ratio` > 1: 0.22-0.26 rad in one 0.1 s action); for records that predate it, "
+        f"more than {POSTURE_FLIP_RAD} rad in one action (`transfer_max_joint_step_rad`; the flips measured 0.5-1.8 rad).",
+        "Spills after the scoop, by stage: episodes with a particle lost in the lift, the carry, the pour and after the "
+        "pour (an episode may lose food in more than one); the next table gives the causes.",
         "Reach check failed: transfers for which no option of the reach check (docs/evaluation.md) passed "
         "(`transfer_reachable`); the one that went farthest was executed. '-' where the records predate the check.",
     ]

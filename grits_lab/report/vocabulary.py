@@ -9,6 +9,7 @@ from __future__ import annotations
 from grits_lab.records import UNSEEN_FOODS
 
 METHOD_NAMES: dict[str, str] = {
+    "expert": "Scripted expert (oracle)",
     "rule_based": "Rule-based",
     "bc": "Behavior cloning",
     "scone": "SCONE",

@@ -22,8 +22,8 @@ from grits_lab.seeding import derive_seed, make_rng
 from grits_lab.sim.cameras import CameraImage, render
 from grits_lab.sim.sim_config import SimConfig
 from grits_lab.sim.foods import FoodSpec, level_count, load_foods, sample_particles
-from grits_lab.sim.spill_metrics import COVERAGE_THRESHOLD, SpillTracker, classify, fill_height, spoon_coverage, spoon_outside_bowl
-from grits_lab.sim.robot import REST_POSE, PandaKinematics, pose_to_matrix, spoon_in_hand
+from grits_lab.sim.spill_metrics import COVERAGE_THRESHOLD, SpillTracker, above_spoon_rim, classify, fill_height, spoon_coverage
+from grits_lab.sim.robot import REST_POSE, PandaKinematics, joint_speed_ratio, pose_to_matrix, spoon_in_hand
 from grits_lab.sim.shapes import TARGET_BOWL, BowlGeometry, SpoonGeometry
 from grits_lab.sim.world import World, build_world, settle
 
@@ -39,6 +39,7 @@ class PathCheck:
     unreachable: np.ndarray
     joint_steps: np.ndarray
     joints: np.ndarray
+    speed_ratios: np.ndarray  # (T,) the largest joint step over that joint's Panda limit per action (> 1: too fast)
 
     @property
     def n_checked(self) -> int:
@@ -190,8 +191,9 @@ class ScoopEnv:
         self.tracker = SpillTracker(len(self.world.particles))
         self.step_count = 0
         self.ik_failures = 0
+        self.max_joint_speed_ratio = 0.0
         counts = self._classify()
-        self.tracker.observe(counts, self._spoon_outside_source())
+        self.tracker.observe(counts)
         self.initial_outside = int(counts.outside_source.sum())
         return self._obs(), self._info(ik_failure=False)
 
@@ -221,42 +223,61 @@ class ScoopEnv:
         self._pose_target = target
         self.step_count += 1
         self.ik_failures += int(failed)
-        joint_step = float(np.abs(self._joint_target - joints_before).max())
+        delta = self._joint_target - joints_before
+        joint_step = float(np.abs(delta).max())
+        speed_ratio = joint_speed_ratio(delta, cfg.control_hz)
+        self.max_joint_speed_ratio = max(self.max_joint_speed_ratio, speed_ratio)
         before = self.tracker.history[-1] if self.tracker.history else 0
-        spilled = self.tracker.update(self._classify(), self._spoon_outside_source())
+        spilled = self.tracker.update(self._classify(), thrown=speed_ratio > 1.0)
         truncated = self.step_count >= cfg.max_episode_steps
-        return self._obs(), -float(spilled - before), False, truncated, self._info(ik_failure=failed, joint_step=joint_step)
+        return self._obs(), -float(spilled - before), False, truncated, self._info(ik_failure=failed, joint_step=joint_step,
+                                                                                  joint_speed_ratio=speed_ratio)
 
-    def _track(self, start: np.ndarray, target: np.ndarray, joints: np.ndarray) -> Iterator[tuple[int, np.ndarray, bool]]:
+    def set_stage(self, stage: str) -> None:
+        """Name the task stage the next actions belong to (scoop, lift, carry, pour, after_pour): every
+        particle spilled from then on is attributed to it (`metrics()["spill_attribution"]`). A reset
+        starts in "scoop". ValueError for another name."""
+        self._require_world()
+        self.tracker.set_stage(stage)
+
+    def _track(self, start: np.ndarray, target: np.ndarray, joints: np.ndarray,
+               rest_pull: bool | None = None) -> Iterator[tuple[int, np.ndarray, bool]]:
         """The joint targets of one action: for each of the `ik_per_action` pieces of the pose path
         from (4, 4) `start` to `target`, (piece index, joint target (7,), whether IK reached the piece).
-        An unreachable piece keeps the last reachable joint target."""
+        An unreachable piece keeps the last reachable joint target. rest_pull: the IK's null-space
+        pull towards the rest posture (`PandaKinematics.solve`); None: the current stage's, on in the
+        scoop (the policies' and demonstrations' arm) and off in the scripted stages after it."""
         cfg = self.config
+        if rest_pull is None:
+            rest_pull = self.tracker.stage == "scoop"
         for k in range(cfg.ik_per_action):
             pose = interpolate_pose(start, target, (k + 1) / cfg.ik_per_action)
-            ik = self.kinematics.solve(pose @ self._hand_in_spoon, joints, cfg.ik_position_tolerance, cfg.ik_orientation_tolerance)
+            ik = self.kinematics.solve(pose @ self._hand_in_spoon, joints, cfg.ik_position_tolerance, cfg.ik_orientation_tolerance,
+                                       rest_pull=rest_pull)
             if ik.ok:
                 joints = ik.joints
             yield k, joints, ik.ok
 
-    def check_path(self, path: np.ndarray) -> PathCheck:
+    def check_path(self, path: np.ndarray, rest_pull: bool | None = None) -> PathCheck:
         """What the arm would do with the actions `path` (T, 9) from its present joint target, on the
-        kinematic copy only (the world is not touched): the same IK tracking as `step`, so entry t
-        is what `step(path[t])` would report as `ik_failure` and `joint_step`. Raises RuntimeError
-        before `reset`.
+        kinematic copy only (the world is not touched): the same IK tracking as `step` (with
+        `rest_pull` as `_track`: None the current stage's; pass False for a motion of the stages
+        after the scoop), so entry t is what `step(path[t])` would report as `ik_failure`,
+        `joint_step` and `joint_speed_ratio`. Raises RuntimeError before `reset`.
         """
         self._require_world()
         joints, start = self._joint_target.copy(), self._pose_target
-        unreachable, steps = [], []
+        unreachable, steps, ratios = [], [], []
         for action in np.asarray(path, dtype=np.float64).reshape(-1, 9):
             target = pose9_to_matrix(action)
             before, failed = joints, False
-            for _, joints, reached in self._track(start, target, joints):
+            for _, joints, reached in self._track(start, target, joints, rest_pull):
                 failed |= not reached
             start = target
             unreachable.append(failed)
             steps.append(float(np.abs(joints - before).max()))
-        return PathCheck(np.array(unreachable, dtype=bool), np.array(steps), joints)
+            ratios.append(joint_speed_ratio(joints - before, self.config.control_hz))
+        return PathCheck(np.array(unreachable, dtype=bool), np.array(steps), joints, np.array(ratios))
 
     @staticmethod
     def _far_at_rest(world: World, a: np.ndarray, b: np.ndarray, distance: float) -> np.ndarray:
@@ -342,8 +363,10 @@ class ScoopEnv:
             "scoop_failure": not success,
             "spillage": spilled > 0,
             "first_spill_step": self.tracker.first_spill_step,
-            "spill_mechanisms": self.tracker.mechanisms(counts),
+            "spill_attribution": self.tracker.attribution(counts),
+            "above_spoon_rim": int((counts.lifted & above_spoon_rim(positions, spoon, self.spoon_geometry)).sum()),
             "ik_failures": self.ik_failures,
+            "max_joint_speed_ratio": self.max_joint_speed_ratio,
         }
 
     # ---- internals ---------------------------------------------------------------------------
@@ -355,10 +378,6 @@ class ScoopEnv:
                 raise InputError(f"spoon_home {list(self.config.spoon_home)} is out of the robot's reach")
             self._home_joints = ik.joints
         return self._home_joints.copy()
-
-    def _spoon_outside_source(self) -> bool:
-        w = self._require_world()
-        return spoon_outside_bowl(w.spoon_matrix(), w.source_bowl_position, w.source_geometry)
 
     def _classify(self, positions: np.ndarray | None = None):
         w = self._require_world()
@@ -372,12 +391,14 @@ class ScoopEnv:
         return {"ee_pose": matrix_to_pose9(w.spoon_matrix()).astype(np.float32),
                 "joint_pos": w.joint_positions().astype(np.float32)}
 
-    def _info(self, ik_failure: bool, joint_step: float = 0.0) -> dict[str, Any]:
-        # joint_step: the largest change of any arm joint's commanded angle over the action (rad).
-        # The Panda moves at most 2.175-2.61 rad/s, 0.22-0.26 rad per 0.1 s action; far larger
-        # steps are the IK leaving for another arm posture (an elbow or wrist flip).
+    def _info(self, ik_failure: bool, joint_step: float = 0.0, joint_speed_ratio: float = 0.0) -> dict[str, Any]:
+        # joint_step: the largest change of any arm joint's commanded angle over the action (rad);
+        # joint_speed_ratio: the largest over that joint's Panda limit (robot.PANDA_MAX_JOINT_VELOCITY
+        # per action): above 1 no Panda could follow, and far above it is the IK leaving for another
+        # arm posture (an elbow or wrist flip).
         return {"step": self.step_count, "spilled": self.tracker.history[-1] if self.tracker.history else 0,
-                "ik_failure": ik_failure, "ik_failures": self.ik_failures, "joint_step": joint_step}
+                "ik_failure": ik_failure, "ik_failures": self.ik_failures, "joint_step": joint_step,
+                "joint_speed_ratio": joint_speed_ratio}
 
     def _require_world(self) -> World:
         if self.world is None:

@@ -37,18 +37,17 @@ class EpisodeRecord:
     wall_time_s: float = 0.0
     target_bowl_xy: list[float] = field(default_factory=list)
     spilled_over_time: list[int] = field(default_factory=list)  # spilled count after each action
-    # Spilled particles by where they left from (grits_lab.sim.spill_metrics.SpillTracker): over_rim,
-    # off_spoon, elsewhere.
-    spill_mechanisms: dict[str, int] = field(default_factory=dict)
+    # Spilled particles by stage and cause, `spilled_<stage>_<cause>` (grits_lab.sim.spill_metrics.SpillTracker).
+    spill_attribution: dict[str, int] = field(default_factory=dict)
     particle_parameters: list[dict[str, Any]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     def summary(self) -> dict[str, Any]:
-        """The scalar fields (no per-step lists), with the spill mechanisms flattened to `spilled_<mechanism>`."""
+        """The scalar fields (no per-step lists), with the spill attribution flattened to `spilled_<stage>_<cause>`."""
         out = {k: v for k, v in self.to_dict().items() if not isinstance(v, (list, dict))}
-        out.update({f"spilled_{k}": v for k, v in self.spill_mechanisms.items()})
+        out.update(self.spill_attribution)
         return out
 
 
@@ -119,7 +118,7 @@ def make_record(env: Any, wall_time_s: float = 0.0, transferred: int = -1) -> Ep
         first_spill_step=m["first_spill_step"], ik_failures=m["ik_failures"], n_steps=env.step_count,
         transferred=transferred, settle_time_s=env.world.settle_time_s, wall_time_s=round(wall_time_s, 3),
         target_bowl_xy=[round(float(v), 5) for v in env.world.target_bowl_position[:2]],
-        spilled_over_time=list(env.tracker.history), spill_mechanisms=m["spill_mechanisms"],
+        spilled_over_time=list(env.tracker.history), spill_attribution=m["spill_attribution"],
         particle_parameters=env.particle_parameters(),
     )
 

@@ -25,8 +25,18 @@ ARM_JOINTS = tuple(range(7))
 FINGER_JOINTS = (9, 10)
 GRASP_LINK = 11  # panda_grasptarget
 ARM_FORCES = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
+# The Panda's joint velocity limits, rad/s (Franka Control Interface documentation, "Robot and
+# interface specifications", limits in joint space: q_dot_max).
+PANDA_MAX_JOINT_VELOCITY = (2.1750, 2.1750, 2.1750, 2.1750, 2.6100, 2.6100, 2.6100)
 # A comfortable configuration with the hand pointing forward and down: the IK null-space target.
 REST_POSE = (0.0, 0.2, 0.0, -2.0, 0.0, 2.6, 0.785)
+
+
+def joint_speed_ratio(joint_step: np.ndarray, control_hz: float) -> float:
+    """max_j |joint_step_j| / (PANDA_MAX_JOINT_VELOCITY_j / control_hz) for one action's change of
+    the 7 arm joints (rad): above 1, no Panda moves that far in one control period."""
+    limit = np.asarray(PANDA_MAX_JOINT_VELOCITY) / float(control_hz)
+    return float(np.max(np.abs(np.asarray(joint_step, dtype=np.float64)[:7]) / limit))
 
 
 def pose_to_matrix(position: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:
@@ -82,8 +92,14 @@ class PandaKinematics:
         state = self.client.getLinkState(self.robot, GRASP_LINK, computeForwardKinematics=True)
         return pose_to_matrix(np.array(state[4]), np.array(state[5]))
 
-    def solve(self, target: np.ndarray, seed_joints: np.ndarray, pos_tol: float, rot_tol: float) -> IKResult:
-        """IK for a (4, 4) grasp-frame target, starting from `seed_joints`; checks the residual by FK."""
+    def solve(self, target: np.ndarray, seed_joints: np.ndarray, pos_tol: float, rot_tol: float, rest_pull: bool = True) -> IKResult:
+        """IK for a (4, 4) grasp-frame target, starting from `seed_joints`; checks the residual by FK.
+
+        rest_pull: the first solve pulls the arm towards REST_POSE in the null space (a natural elbow);
+        False: every solve only refines from `seed_joints`, so the arm follows a path with the least
+        joint motion and no self-motion (a redundant arm far from its rest posture otherwise swings
+        its shoulder and upper arm against each other in one step, whatever the step's size).
+        """
         position, quat = matrix_to_pose(target)
         self.set_joints(seed_joints)
         best = None
@@ -91,7 +107,7 @@ class PandaKinematics:
             # The first solve pulls towards the rest pose (null space) to keep a natural elbow;
             # later ones refine from the previous solution without it, which reaches poses the
             # null-space pull would stop short of.
-            extra = dict(lowerLimits=self.lower, upperLimits=self.upper, jointRanges=self.ranges, restPoses=self.rest) if attempt == 0 else {}
+            extra = dict(lowerLimits=self.lower, upperLimits=self.upper, jointRanges=self.ranges, restPoses=self.rest) if attempt == 0 and rest_pull else {}
             sol = self.client.calculateInverseKinematics(
                 self.robot, GRASP_LINK, position.tolist(), quat.tolist(), maxNumIterations=100, residualThreshold=1e-5, **extra,
             )

@@ -49,6 +49,13 @@ def in_spoon_mask(positions: np.ndarray, spoon_pose: np.ndarray, spoon: SpoonGeo
     return inside & (local[:, 2] > 0.0) & (local[:, 2] < SPOON_MAX_HEIGHT)
 
 
+def above_spoon_rim(positions: np.ndarray, spoon_pose: np.ndarray, spoon: SpoonGeometry) -> np.ndarray:
+    """(N,) particles whose centre is higher above the spoon's floor than its rim: the heap a
+    loaded spoon carries above its rim, which a carry can shed."""
+    local = (positions - spoon_pose[:3, 3]) @ spoon_pose[:3, :3]
+    return local[:, 2] > spoon.rim_height
+
+
 def in_bowl_cylinder(positions: np.ndarray, bowl_position: np.ndarray, bowl: BowlGeometry, above: float) -> np.ndarray:
     d = positions - bowl_position
     r = np.linalg.norm(d[:, :2], axis=1)
@@ -110,44 +117,75 @@ def spoon_coverage(positions: np.ndarray, radii: np.ndarray, spoon_pose: np.ndar
     return float(covered.mean())
 
 
-SPILL_MECHANISMS = ("over_rim", "off_spoon", "elsewhere")
+SPILL_STAGES = ("scoop", "lift", "carry", "pour", "after_pour")
+SPILL_CAUSES = ("over_rim", "off_spoon", "poured_outside", "bounced_out", "posture_flip")
+# A particle that left the spoon within this many actions after one whose joint step exceeded the
+# Panda's limit was thrown by it: a grain flung 20-30 cm falls for 0.2-0.25 s before it lands.
+THROW_WINDOW = 3
+
+
+def attribution_columns() -> dict[str, tuple[str, str]]:
+    """Record column -> (stage, cause) of every stage x cause count: `spilled_<stage>_<cause>`."""
+    return {f"spilled_{stage}_{cause}": (stage, cause) for stage in SPILL_STAGES for cause in SPILL_CAUSES}
 
 
 class SpillTracker:
-    """Keeps the sticky per-particle spilled flags, the spilled count after every action step and
-    where each spilled particle left from (its spill mechanism).
+    """Keeps the per-particle spilled flags, the spilled count after every action step, and for
+    every spilled particle the stage and cause of its spill (docs/evaluation.md, "Where food is lost").
 
-    Mechanisms, from the last check (one per action, 10 Hz) before a particle was first spilled:
-    - over_rim: it lay in the bowl (below the rim) and not in the spoon: it left over the rim
-      (pushed by the drag, or rolling off a heap).
-    - off_spoon: otherwise, when the spoon was outside the source bowl's footprint: it fell off the
-      spoon, or off the heap the spoon carries, on the way out or during the transfer.
-    - elsewhere: otherwise: it was on the spoon (or its heap) above the bowl and still landed
-      outside it (bounced over the rim after falling).
+    Stage: the task stage the env was in (`stage`, set by the task runner: scoop, lift, carry,
+    pour, after_pour) when the particle was first counted spilled. Cause, from where the particle
+    was at the previous check (one per action, 10 Hz) and how the arm moved:
+    - over_rim: it lay in the source bowl (below the rim) and not in the spoon: it left over the rim.
+    - bounced_out: it lay in the target bowl: it left it again (bounced or rolled out).
+    - posture_flip: it came off the spoon within `THROW_WINDOW` actions after an action whose joint
+      step exceeded the Panda's velocity limit (`thrown`): the arm swung into another posture.
+    - poured_outside: it came off the spoon in the pour or after it and landed outside the target.
+    - off_spoon: it came off the spoon (or off the heap the spoon carries) while the spoon moved.
+    A particle that comes to rest in the target bowl is no longer counted (its flag is cleared), so
+    one that bounces out later counts once more, as bounced_out.
     """
 
     def __init__(self, n_particles: int) -> None:
         self.spilled_flags = np.zeros(n_particles, dtype=bool)
-        self.mechanism = np.full(n_particles, -1, dtype=np.int8)  # index into SPILL_MECHANISMS, -1 not spilled
+        self.stage_index = np.full(n_particles, -1, dtype=np.int8)  # into SPILL_STAGES, -1 not spilled
+        self.cause_index = np.full(n_particles, -1, dtype=np.int8)  # into SPILL_CAUSES
         self.history: list[int] = []
         self.first_spill_step = -1
+        self.stage = SPILL_STAGES[0]
         self._was_in_bowl = np.zeros(n_particles, dtype=bool)
-        self._spoon_was_outside = False
+        self._was_in_target = np.zeros(n_particles, dtype=bool)
+        self._since_throw = THROW_WINDOW  # actions since the last one over the Panda's limit
 
-    def observe(self, counts: ParticleCounts, spoon_outside_source: bool) -> None:
-        """Remember where particles and spoon are (the reference for the next update's mechanisms)."""
+    def set_stage(self, stage: str) -> None:
+        """The task stage from the next update on (one of SPILL_STAGES); ValueError otherwise."""
+        if stage not in SPILL_STAGES:
+            raise ValueError(f"unknown stage {stage!r}; one of {', '.join(SPILL_STAGES)}")
+        self.stage = stage
+
+    def observe(self, counts: ParticleCounts) -> None:
+        """Remember where particles are (the reference for the next update's causes)."""
         self._was_in_bowl = counts.in_source & ~counts.in_spoon
-        self._spoon_was_outside = bool(spoon_outside_source)
+        self._was_in_target = counts.in_target & ~counts.in_spoon
 
-    def update(self, counts: ParticleCounts, spoon_outside_source: bool = False) -> int:
+    def update(self, counts: ParticleCounts, thrown: bool = False) -> int:
+        """Account for the state after one action; `thrown`: that action stepped a joint beyond the
+        Panda's limit. Returns the spilled count."""
+        self._since_throw = 0 if thrown else self._since_throw + 1
         now = counts.outside_source & ~counts.in_spoon & ~counts.in_target
         new = now & ~self.spilled_flags
         if new.any():
-            kind = np.where(self._was_in_bowl[new], 0, 1 if self._spoon_was_outside else 2)
-            self.mechanism[new] = kind
+            stage = SPILL_STAGES.index(self.stage)
+            from_spoon = ("posture_flip" if self._since_throw < THROW_WINDOW
+                          else "poured_outside" if stage >= SPILL_STAGES.index("pour") else "off_spoon")
+            cause = np.where(self._was_in_bowl[new], SPILL_CAUSES.index("over_rim"),
+                             np.where(self._was_in_target[new], SPILL_CAUSES.index("bounced_out"), SPILL_CAUSES.index(from_spoon)))
+            self.cause_index[new] = cause
+            self.stage_index[new] = stage
         self.spilled_flags |= now
-        self.observe(counts, spoon_outside_source)
-        spilled = int((self.spilled_flags & ~counts.in_target).sum())
+        self.spilled_flags &= ~counts.in_target  # food that reached the target bowl is delivered
+        self.observe(counts)
+        spilled = int(self.spilled_flags.sum())
         if spilled > 0 and self.first_spill_step < 0:
             self.first_spill_step = len(self.history)
         self.history.append(spilled)
@@ -156,7 +194,11 @@ class SpillTracker:
     def current(self, counts: ParticleCounts) -> int:
         return int((self.spilled_flags & ~counts.in_target).sum())
 
-    def mechanisms(self, counts: ParticleCounts) -> dict[str, int]:
-        """Spilled particles now (not in the target bowl) by mechanism: {over_rim, off_spoon, elsewhere}."""
+    def attribution(self, counts: ParticleCounts) -> dict[str, int]:
+        """Spilled particles now (not in the target bowl) by stage and cause, keyed as `attribution_columns`."""
         spilled = self.spilled_flags & ~counts.in_target
-        return {name: int((spilled & (self.mechanism == i)).sum()) for i, name in enumerate(SPILL_MECHANISMS)}
+        out = {}
+        for column, (stage, cause) in attribution_columns().items():
+            mask = spilled & (self.stage_index == SPILL_STAGES.index(stage)) & (self.cause_index == SPILL_CAUSES.index(cause))
+            out[column] = int(mask.sum())
+        return out

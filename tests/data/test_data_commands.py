@@ -67,7 +67,7 @@ def test_collect_refuses_a_quantity_level_no_food_has_before_writing(tmp_path, c
     assert not (tmp_path / "d").exists()
 
 
-def test_dataset_info_shows_the_spill_mechanism_mix_and_the_expert_per_food_level(tmp_path):
+def test_dataset_info_sums_spills_by_stage_and_cause_and_the_expert_per_food_level(tmp_path):
     import numpy as np
     import yaml
 
@@ -76,11 +76,13 @@ def test_dataset_info_shows_the_spill_mechanism_mix_and_the_expert_per_food_leve
 
     (tmp_path / MANIFEST_FILE).write_text(yaml.safe_dump({"kind": "demos", "status": "complete"}))
     rows = [("soybeans", "low", True, 3, 0, 1), ("soybeans", "low", False, 0, 0, 0), ("sago", "high", True, 0, 4, 0)]
-    for i, (food, level, ok, rim, spoon, other) in enumerate(rows):
+    for i, (food, level, ok, rim, spoon, flung) in enumerate(rows):
         write_episode(tmp_path, f"e{i}", {"action": np.zeros((2, 9), np.float32)}, {
-            "food": food, "level": level, "scoop_success": ok, "spilled_any": rim + spoon + other > 0,
-            "spilled_over_rim": rim, "spilled_off_spoon": spoon, "spilled_elsewhere": other})
+            "food": food, "level": level, "scoop_success": ok, "spilled_any": rim + spoon + flung > 0,
+            "spilled_scoop_over_rim": rim, "spilled_lift_off_spoon": spoon, "spilled_carry_posture_flip": flung,
+            "spilled_pour_poured_outside": 0})
     summary = dataset_summary(tmp_path)
-    assert summary["spill_mechanisms"] == {"over_rim": "3 particles (38%) in 1 episodes", "off_spoon": "4 particles (50%) in 1 episodes",
-                                           "elsewhere": "1 particles (12%) in 1 episodes"}
+    assert summary["spills_by_stage_and_cause"] == {
+        "scoop / over_rim": "3 particles (38%) in 1 episodes", "lift / off_spoon": "4 particles (50%) in 1 episodes",
+        "carry / posture_flip": "1 particles (12%) in 1 episodes"}
     assert summary["by_food_level"] == {"sago/high": "scoop success 1/1, spilled 1/1", "soybeans/low": "scoop success 1/2, spilled 1/2"}

@@ -97,18 +97,19 @@ def test_transfer_options_start_with_the_configured_one_and_never_repeat():
     from grits_lab.evaluation.evaluation_config import TransferSettings
     from grits_lab.evaluation.transfer import TransferOption, transfer_options
 
-    settings = TransferSettings(level_steps=10, pour_height=0.05)
+    settings = TransferSettings(level_steps=10, pour_height=0.01, alternative_pour_heights=[0.03, 0.05])
     options = transfer_options(settings)
-    assert options[0] == TransferOption(10, 0.0, 0.05, 0.0)
-    assert options[1] == TransferOption(10, 0.0, 0.05, 0.03)  # the pour alternatives of a lift come before the next lift
-    assert len(options) == len(set(options)) == 2 * 5 * 2 * 3  # level steps x headings x pour heights x offsets
+    assert options[0] == TransferOption(10, 0.0, 0.01, 0.0)
+    assert options[1] == TransferOption(10, 0.0, 0.01, 0.03)  # the pour alternatives of a lift come before the next lift
+    assert len(options) == len(set(options)) == 2 * 5 * 3 * 3  # level steps x headings x pour heights x offsets
     assert transfer_options(TransferSettings(alternative_level_steps=[10], alternative_level_yaw_deg=[0.0],
-                                             alternative_pour_heights=[0.05], alternative_pour_offsets=[0.0])) == options[:1]
+                                             alternative_pour_heights=[0.01], alternative_pour_offsets=[0.0])) == options[:1]
 
 
 def test_an_unreachable_pour_is_replaced_by_one_the_arm_reaches(env):
-    """A target close to the robot's base: pouring 5 cm above its centre folds the elbow past its
-    limit; the check finds it before moving and pours 3 cm farther out, which the arm reaches."""
+    """A target close to the robot's base: pouring above its centre folds the elbow past its limit;
+    the check finds it before moving and takes another option, which the arm follows within the
+    Panda's joint velocity limits."""
     import math
 
     from grits_lab.evaluation.evaluation_config import TransferSettings
@@ -119,16 +120,71 @@ def test_an_unreachable_pour_is_replaced_by_one_the_arm_reaches(env):
     settings = TransferSettings()
     current = matrix_to_pose9(scene.spoon_pose())
     heading = math.atan2(target.centre[1], target.centre[0])
+    check = lambda actions: env.check_path(actions, rest_pull=False)  # noqa: E731 (the stages after the scoop)
     unchecked = choose_transfer(current, target, obstacles, settings, 0.012, 0.036, heading, check=None)
     assert unchecked.option.pour_offset == 0.0 and unchecked.n_checks == 0
-    assert env.check_path(np.concatenate([unchecked.path, unchecked.pour])).unreachable[1:].any()
-    plan = choose_transfer(current, target, obstacles, settings, 0.012, 0.036, heading, check=env.check_path)
+    assert check(unchecked.actions).unreachable[1:].any()
+    plan = choose_transfer(current, target, obstacles, settings, 0.012, 0.036, heading, check=check)
     assert plan.reachable and plan.n_checks >= 2 and plan.option != unchecked.option
-    infos = [env.step(a)[4] for a in np.concatenate([plan.path, plan.pour])]
+    env.set_stage("carry")
+    infos = [env.step(a)[4] for a in plan.actions]
     assert not any(i["ik_failure"] for i in infos[1:])
-    assert max(i["joint_step"] for i in infos) <= settings.max_joint_step
+    assert max(i["joint_speed_ratio"] for i in infos) <= 1.0
     centre = np.asarray(target.centre[:2])
-    assert np.linalg.norm(plan.path[-1, :2] - centre) < target.rim_radius  # still above the bowl
+    assert np.linalg.norm(plan.actions[-1, :2] - centre) < target.rim_radius  # still above the bowl
+    assert plan.stages[0] == "lift" and plan.stages[-1] == "pour"
+    assert plan.n_pour % settings.pour_steps == 0  # the roll, slowed as a whole where the arm needed it
+
+
+def _fake_check(ratio_of):
+    """A PathCheck stand-in: speed ratio of each action from `ratio_of(actions)`, nothing unreachable."""
+    from types import SimpleNamespace
+
+    def check(actions):
+        ratios = np.asarray(ratio_of(actions), dtype=np.float64)
+        return SimpleNamespace(unreachable=np.zeros(len(actions), bool), joint_steps=ratios * 0.2175, speed_ratios=ratios)
+    return check
+
+
+def test_a_motion_too_fast_for_the_panda_is_slowed_stage_by_stage_on_the_same_path():
+    from grits_lab.evaluation.transfer import slow_to_limits
+
+    start = np.array([0.0, 0, 0.1, 1, 0, 0, 0, 1, 0])
+    actions = np.array([start + [0.01 * (i + 1), 0, 0, 0, 0, 0, 0, 0, 0] for i in range(6)])
+    stages = ["lift"] * 2 + ["carry"] * 4
+    # Joint speed proportional to the spoon's step: the carry's 1 cm steps ask for 2.5x the limit.
+    ratio = _fake_check(lambda a: np.linalg.norm(np.diff(np.vstack([start[None], a])[:, :3], axis=0), axis=1) * 250)
+    slowed, new_stages, answer, within = slow_to_limits(start, actions, stages, ratio, max_slowdown=8)
+    assert within and answer.speed_ratios.max() <= 1.0
+    # Both stages were too fast (2.5x): each action is cut in ceil(2.5 * 1.05) = 3, on the same straight path.
+    assert new_stages == ["lift"] * 6 + ["carry"] * 12
+    np.testing.assert_allclose(slowed[2::3], actions, atol=1e-6)
+    np.testing.assert_allclose(np.diff(slowed[:, 0]), 0.01 / 3, atol=1e-6)
+
+
+def test_a_posture_change_cannot_be_slowed_away_and_the_option_fails():
+    from grits_lab.evaluation.transfer import slow_to_limits
+
+    start = np.array([0.0, 0, 0.1, 1, 0, 0, 0, 1, 0])
+    actions = np.array([start + [0.01 * (i + 1), 0, 0, 0, 0, 0, 0, 0, 0] for i in range(4)])
+    # One jump of the IK's solution, the same size however finely the path is cut.
+    jump = _fake_check(lambda a: np.where(np.arange(len(a)) == len(a) // 2, 1.8, 0.3))
+    _, _, answer, within = slow_to_limits(start, actions, ["carry"] * 4, jump, max_slowdown=8)
+    assert not within and answer.speed_ratios.max() > 1.0
+
+
+def test_the_min_jerk_carry_starts_and_ends_at_rest_and_never_exceeds_the_peak_step():
+    from grits_lab.evaluation.transfer import BowlEstimate, plan_transfer
+
+    start = np.array([0.6, -0.1, 0.12, 1, 0, 0, 0, 1, 0], dtype=np.float32)
+    target = BowlEstimate(np.array([0.45, 0.3, 0.0]), 0.058, 0.045, 100, 0.0)
+    path = plan_transfer(start, target, [], clearance=0.04, pour_height=0.01, max_step=0.012, spoon_reach=0.036,
+                         level_steps=10, profile="min_jerk")
+    steps = np.linalg.norm(np.diff(np.vstack([start[None], path])[:, :3], axis=0), axis=1)
+    assert steps.max() <= 0.012 + 1e-6
+    across = np.flatnonzero(np.abs(np.diff(path[:, 1])) > 1e-9)  # the segment across, towards the target
+    assert steps[across[0]] < 0.002 and steps[across[-1] + 1] < 0.002  # gentle start and stop
+    assert abs(path[-1, 2] - (0.045 + 0.01)) < 1e-6
 
 
 def test_a_non_positive_joint_step_limit_is_a_config_error():
@@ -149,7 +205,7 @@ def test_without_a_passing_option_the_smallest_joint_step_is_taken():
     from grits_lab.evaluation.transfer import BowlEstimate, choose_transfer
 
     settings = TransferSettings(alternative_level_steps=[], alternative_level_yaw_deg=[-60.0],
-                                alternative_pour_heights=[], alternative_pour_offsets=[])
+                                alternative_pour_heights=[], alternative_pour_offsets=[], slow_to_limits=False)
     start = np.array([0.6, -0.1, 0.12, 1, 0, 0, 0, 1, 0], dtype=np.float32)
     target = BowlEstimate(np.array([0.45, 0.3, 0.0]), 0.06, 0.05, 100, 0.0)
     answers = iter([(2, 1.4), (9, 0.35)])  # (unreachable actions, largest joint step) of each option
@@ -158,7 +214,8 @@ def test_without_a_passing_option_the_smallest_joint_step_is_taken():
         n_bad, step = next(answers)
         unreachable = np.zeros(len(actions), dtype=bool)
         unreachable[-n_bad:] = True  # at the pour: a failure after the lift
-        return SimpleNamespace(unreachable=unreachable, joint_steps=np.full(len(actions), step))
+        return SimpleNamespace(unreachable=unreachable, joint_steps=np.full(len(actions), step),
+                               speed_ratios=np.full(len(actions), step / 0.2175))
 
     plan = choose_transfer(start, target, [], settings, 0.012, 0.036, None, check)
     assert (plan.option.level_yaw_deg, plan.reachable, plan.n_checks) == (-60.0, False, 2)

@@ -96,20 +96,39 @@ def test_particles_neither_pass_through_nor_jitter_out_of_a_held_spoon(env, scoo
     assert env.metrics()["scooped"] == before
 
 
-def test_tipping_the_loaded_spoon_over_the_table_spills(env, scooped):
-    record, traj = scooped
+def _tip_over_table(env, tip_actions):
     start = matrix_to_pose9(env.spoon_pose())
     over_table = start.copy()
     over_table[:3] = [0.45, -0.22, 0.16]
     tipped = over_table.copy()
     tipped[3:] = matrix_to_pose9(np.block([[spoon_orientation(0, 0) @ np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]]), np.zeros((3, 1))], [np.zeros((1, 3)), np.ones((1, 1))]]))[3:]
-    path = np.concatenate([np.linspace(start, over_table, 15), np.linspace(over_table, tipped, 10), np.repeat(tipped[None], 10, 0)])
+    return np.concatenate([np.linspace(start, over_table, 15), np.linspace(over_table, tipped, tip_actions), np.repeat(tipped[None], 10, 0)])
+
+
+def test_tipping_the_loaded_spoon_over_the_table_spills(env, scooped):
+    record, traj = scooped
+    path = _tip_over_table(env, 25)
+    ratios = env.check_path(path).speed_ratios
     rec = play_trajectory(env, path)
     assert rec.spillage and rec.spilled >= record.scooped // 2
     assert rec.first_spill_step > len(traj)  # nothing spilled during the scoop itself
     assert rec.spilled_over_time == sorted(rec.spilled_over_time)
-    # It fell off the spoon outside the bowl's footprint, and the record says so.
-    assert rec.spill_mechanisms["off_spoon"] >= rec.spilled - 1 and sum(rec.spill_mechanisms.values()) == rec.spilled
+    # Every grain left from the spoon (play_trajectory names no stage: all "scoop"); those that fell
+    # before the arm's one step beyond the Panda's limit (the wrist's flip as the roll nears 90 deg)
+    # fell off the moving spoon.
+    by_spoon = rec.spill_attribution["spilled_scoop_off_spoon"] + rec.spill_attribution["spilled_scoop_posture_flip"]
+    assert by_spoon == rec.spilled == sum(rec.spill_attribution.values())
+    first_over = int(np.argmax(ratios > 1.0))
+    assert rec.spilled_over_time[len(traj) + first_over - 1] == rec.spill_attribution["spilled_scoop_off_spoon"] > 0
+
+
+def test_food_thrown_by_a_tip_faster_than_a_panda_can_move_is_attributed_to_the_arm(env):
+    play_episode(env, "soybeans", "low", seed=0)
+    path = _tip_over_table(env, 3)
+    assert env.check_path(path).speed_ratios.max() > 1.0
+    rec = play_trajectory(env, path)
+    assert rec.spilled > 0
+    assert rec.spill_attribution["spilled_scoop_posture_flip"] >= rec.spilled - 1
 
 
 @pytest.mark.parametrize("food", ["mung_beans", "brown_rice", "sago"])

@@ -1,0 +1,137 @@
+"""Where food is lost: spilled particles by stage and cause, and how much of a lifted load reaches the target bowl.
+
+Both tables read the per-episode attribution columns `spilled_<stage>_<cause>` that `grits-lab
+evaluate` records (grits_lab/sim/spill_metrics.py, `SpillTracker`); records made before those
+columns existed give an empty table, never zeros.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+
+from grits_lab.intervals import format_rate, rate
+from grits_lab.report.tables import ReportTable, all_variants
+from grits_lab.report.vocabulary import LEVEL_ORDER, food_display
+from grits_lab.sim.spill_metrics import SPILL_CAUSES, SPILL_STAGES, attribution_columns
+
+CAUSE_NAMES = {
+    "over_rim": "Over the source rim",
+    "off_spoon": "Off the moving spoon",
+    "poured_outside": "Poured outside the target",
+    "bounced_out": "Bounced out of the target",
+    "posture_flip": "Thrown by a posture change",
+}
+STAGE_NAMES = {"scoop": "Scoop", "lift": "Lift", "carry": "Carry", "pour": "Pour", "after_pour": "After the pour"}
+AFTER_SCOOP = SPILL_STAGES[1:]
+# Delivered: at least this share of the lifted load ends in the target bowl, nothing spilled after the scoop.
+DELIVERED_SHARE = 0.9
+
+
+def has_attribution(rows: pd.DataFrame) -> bool:
+    return all(c in rows.columns for c in attribution_columns())
+
+
+def attribution_counts(rows: pd.DataFrame) -> pd.DataFrame:
+    """(episodes x 25) integer particle counts, columns `spilled_<stage>_<cause>`; errors count zero."""
+    counts = rows[list(attribution_columns())].apply(pd.to_numeric, errors="coerce").fillna(0).astype(int)
+    if "is_error" in rows.columns:
+        counts[rows["is_error"].to_numpy()] = 0
+    return counts
+
+
+def spilled_after_scoop(rows: pd.DataFrame) -> pd.Series:
+    """(episodes,) particles spilled in the lift, carry, pour or after it, from the attribution columns."""
+    counts = attribution_counts(rows)
+    return counts[[c for c, (stage, _) in attribution_columns().items() if stage in AFTER_SCOOP]].sum(axis=1)
+
+
+def spill_attribution_table(episodes: pd.DataFrame | None) -> ReportTable:
+    """Method x stage rows, one column per cause: "episodes with that spill / particles".
+
+    Only stages with a spill are shown; `data` holds one row per method, stage and cause with
+    `episodes_k` (episodes with at least one such particle), `episodes`, and `particles`.
+    """
+    display_rows, data_rows = [], []
+    usable = episodes is not None and not episodes.empty and has_attribution(episodes)
+    for variant, name in all_variants(episodes) if usable else []:
+        rows = episodes[episodes["variant"] == variant]
+        counts = attribution_counts(rows)
+        n = len(rows)
+        for stage in SPILL_STAGES:
+            cells: dict[str, str] = {}
+            for cause in SPILL_CAUSES:
+                column = f"spilled_{stage}_{cause}"
+                k, particles = int((counts[column] > 0).sum()), int(counts[column].sum())
+                data_rows.append({"method": rows["method"].iloc[0], "variant": variant, "method_name": name, "stage": stage,
+                                  "cause": cause, "episodes_k": k, "episodes": n, "particles": particles})
+                cells[CAUSE_NAMES[cause]] = f"{k}/{n} ({particles})" if k else "0"
+            stage_columns = [f"spilled_{stage}_{c}" for c in SPILL_CAUSES]
+            if counts[stage_columns].to_numpy().sum() > 0:
+                display_rows.append({"Method": name, "Stage": STAGE_NAMES[stage], **cells,
+                                     "Any cause": f"{int((counts[stage_columns].sum(axis=1) > 0).sum())}/{n}"})
+    notes = [
+        "Each cell: episodes with at least one particle lost that way / episodes (particles in all). A particle "
+        "counts once, in the stage it was first found outside every container and not in the target bowl.",
+        "Causes: over the source rim (it lay in the source bowl); off the moving spoon; poured outside the target "
+        "(left the spoon in the pour or after it); bounced out of the target (it lay in the target bowl); thrown by "
+        "a posture change (left the spoon within 3 actions of one whose joint step exceeded the Panda's velocity "
+        "limit). docs/evaluation.md, \"Where food is lost\".",
+    ]
+    if episodes is not None and not episodes.empty and not usable:
+        notes.insert(0, "These records predate the per-stage attribution (`spilled_<stage>_<cause>` columns).")
+    elif usable and not display_rows:
+        notes.insert(0, "No particle was spilled in any episode.")
+    return ReportTable("spill_attribution", "Where food was lost: stage and cause of every spilled particle",
+                       "Per method and stage, the episodes (and particles) lost to each cause.",
+                       pd.DataFrame(display_rows), pd.DataFrame(data_rows), notes)
+
+
+def delivery_table(episodes: pd.DataFrame | None) -> ReportTable:
+    """How much of the lifted load reached the target bowl, per method (and per food and level for a
+    run of one method, such as the oracle, experiments/oracle_transfer.yaml).
+
+    Over episodes that lifted food (`scooped` > 0, no error): delivered = at least DELIVERED_SHARE of
+    the lifted particles in the target bowl and none spilled after the scoop (Wilson 95 % interval);
+    the mean share delivered; episodes with a spill after the scoop; and the mean heap above the
+    spoon's rim when the scoop ended (`above_spoon_rim`).
+    """
+    display_rows, data_rows = [], []
+    usable = (episodes is not None and not episodes.empty and has_attribution(episodes)
+              and {"scooped", "transferred"} <= set(episodes.columns))
+    variants = all_variants(episodes) if usable else []
+    for variant, name in variants:
+        rows = episodes[(episodes["variant"] == variant) & ~episodes["is_error"]]
+        rows = rows[pd.to_numeric(rows["scooped"], errors="coerce") > 0]
+        groups = [("All foods", "", rows)]
+        if len(variants) == 1:
+            for (food, level), g in sorted(rows.groupby(["food", "level"]),
+                                           key=lambda kv: (food_display(kv[0][0]), LEVEL_ORDER.index(kv[0][1]) if kv[0][1] in LEVEL_ORDER else 9)):
+                groups.append((food_display(food), level, g))
+        for food, level, g in groups:
+            scooped = pd.to_numeric(g["scooped"], errors="coerce")
+            share = pd.to_numeric(g["transferred"], errors="coerce") / scooped
+            after = spilled_after_scoop(g)
+            delivered = (share >= DELIVERED_SHARE) & (after == 0)
+            r = rate(int(delivered.sum()), len(g))
+            heap = pd.to_numeric(g["above_spoon_rim"], errors="coerce") if "above_spoon_rim" in g.columns else None
+            display_rows.append({"Method": name, "Food": food, "Level": level, "Episodes": str(len(g)),
+                                 f"Delivered (>= {DELIVERED_SHARE:.0%}, no spill)": format_rate(r),
+                                 "Mean share delivered": f"{share.mean():.0%}" if len(g) else "—",
+                                 "Spill after the scoop": f"{int((after > 0).sum())}/{len(g)}",
+                                 "Mean lifted / above the rim": f"{scooped.mean():.1f} / {heap.mean():.1f}" if len(g) and heap is not None else "—"})
+            data_rows.append({"method": g["method"].iloc[0] if len(g) else "", "variant": variant, "method_name": name, "food": food,
+                              "level": level, "episodes": len(g), "delivered_k": int(delivered.sum()),
+                              "delivered_low": r.low, "delivered_high": r.high,
+                              "mean_share_delivered": float(share.mean()) if len(g) else math.nan,
+                              "spill_after_scoop_k": int((after > 0).sum()),
+                              "mean_scooped": float(scooped.mean()) if len(g) else math.nan,
+                              "mean_above_spoon_rim": float(heap.mean()) if len(g) and heap is not None else math.nan})
+    notes = [f"Episodes that lifted food (`scooped` > 0). Delivered: at least {DELIVERED_SHARE:.0%} of the lifted particles "
+             "ended in the target bowl and none was spilled after the scoop (Wilson 95 % interval). A share above 100 % "
+             "means food that was in the spoon below the source rim when the scoop was judged also arrived.",
+             "Mean lifted / above the rim: particles lifted, and those of them above the spoon's rim (the heap a carry can shed)."]
+    return ReportTable("delivery", "Delivery after the scoop: how much of the lifted load reached the target bowl",
+                       "Per method over the episodes that lifted food; per food and level for a run of one method.",
+                       pd.DataFrame(display_rows), pd.DataFrame(data_rows), notes)
