@@ -27,8 +27,10 @@ def _loader(path: Path):
         return load_pipeline_config
     if data.get("kind") in ("demos", "spillage"):
         return load_collect_config
-    if name.startswith("evaluate"):
+    if name.startswith("evaluate") or "methods" in data:
         return load_evaluation_config
+    if name.startswith("transfer_"):  # an override of the transfer, merged onto the protocol
+        return lambda p: load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(p)))
     if name.startswith("policy"):
         return load_train_config
     if name.startswith("bc"):
@@ -44,17 +46,17 @@ def test_shipped_config_loads(path):
     assert _loader(path)(path) is not None
 
 
-@pytest.mark.parametrize("path", sorted((ROOT / "experiments" / "transfer_calibration").glob("*.yaml")), ids=lambda p: p.name)
-def test_transfer_calibration_overrides_load_onto_the_protocol_on_training_foods(path):
+def test_the_previous_transfer_override_and_the_oracle_use_seeds_no_evaluation_uses():
     from grits_lab.config import load_yaml
     from grits_lab.evaluation.evaluation_config import load_evaluation_config
-    from grits_lab.tune.study_config import load_study_config
 
-    config = load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(path)))
-    protocol = load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml")
-    assert not set(config.foods) & set(protocol.foods)  # calibrated on training foods, never the unseen ones
-    validation = load_study_config(ROOT / "sweeps" / "grits_cpu.yaml").validation
-    assert (config.seed, sorted(config.foods)) == (validation.seed, sorted(validation.foods))
+    previous = load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(ROOT / "experiments" / "transfer_previous.yaml")))
+    assert (previous.transfer.profile, previous.transfer.rest_pull, previous.transfer.slow_to_limits) == ("constant", True, False)
+    oracle = load_evaluation_config(ROOT / "experiments" / "oracle_transfer.yaml")
+    assert oracle.methods == ["expert"] and len(oracle.foods) == 16
+    used = {load_evaluation_config(p).seed for p in (ROOT / "experiments").glob("evaluate*.yaml")}
+    used |= {load_yaml(p).get("validation", {}).get("seed") for p in (ROOT / "sweeps").glob("*.yaml")}
+    assert oracle.seed not in used
 
 
 @pytest.mark.parametrize("guidance, fragment", [

@@ -73,6 +73,11 @@ class TransferSettings:
     # `alternative_pour_offsets` metres away from the robot's base (negative: towards it).
     # At most `max_checks` options (about 1 s each on one core, more when slowed).
     reach_check: bool = True
+    # The IK's null-space pull towards the arm's rest posture in these stages. Off: the arm follows
+    # the path with the least joint motion; on (as in the scoop, and in the transfer before its
+    # min-jerk version), an arm far from its rest posture swings shoulder against upper arm in
+    # one action however slowly it moves (measured 0.34 rad in 0.1 s, 1.6x the Panda's limit).
+    rest_pull: bool = False
     slow_to_limits: bool = True
     max_slowdown: int = 8
     max_joint_step: float = 0.5

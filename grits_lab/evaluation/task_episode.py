@@ -216,7 +216,7 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     max_step = settings.max_speed / env.config.control_hz
     # The robot's base stands at the world origin (grits_lab/sim/world.py): radial = away from it.
     heading = math.atan2(target.centre[1], target.centre[0]) if settings.heading == "radial" else None
-    check = (lambda actions: env.check_path(actions, rest_pull=False)) if settings.reach_check else None
+    check = (lambda actions: env.check_path(actions, rest_pull=settings.rest_pull)) if settings.reach_check else None
     plan = choose_transfer(current, target, obstacles, settings, max_step, reach, heading, check)
     ik_failures, joint_steps, speed_ratios = 0, [0.0], [0.0]
     spilled_by_stage: dict[str, int] = {}
@@ -225,7 +225,7 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
         nonlocal ik_failures
         if env.tracker.stage != stage:
             spilled_by_stage[env.tracker.stage] = int(env.metrics()["spilled"])
-            env.set_stage(stage)
+            env.set_stage(stage, rest_pull=settings.rest_pull)
         info = env.step(action)[4]
         ik_failures += int(info["ik_failure"])
         joint_steps.append(float(info["joint_step"]))

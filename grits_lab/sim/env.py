@@ -192,6 +192,7 @@ class ScoopEnv:
         self.step_count = 0
         self.ik_failures = 0
         self.max_joint_speed_ratio = 0.0
+        self.rest_pull = True
         counts = self._classify()
         self.tracker.observe(counts)
         self.initial_outside = int(counts.outside_source.sum())
@@ -233,23 +234,25 @@ class ScoopEnv:
         return self._obs(), -float(spilled - before), False, truncated, self._info(ik_failure=failed, joint_step=joint_step,
                                                                                   joint_speed_ratio=speed_ratio)
 
-    def set_stage(self, stage: str) -> None:
+    def set_stage(self, stage: str, rest_pull: bool | None = None) -> None:
         """Name the task stage the next actions belong to (scoop, lift, carry, pour, after_pour): every
         particle spilled from then on is attributed to it (`metrics()["spill_attribution"]`). A reset
-        starts in "scoop". ValueError for another name."""
+        starts in "scoop". rest_pull: whether the IK pulls the arm towards its rest posture from now
+        on (`PandaKinematics.solve`); None: only in the scoop. ValueError for another stage name."""
         self._require_world()
         self.tracker.set_stage(stage)
+        self.rest_pull = stage == "scoop" if rest_pull is None else bool(rest_pull)
 
     def _track(self, start: np.ndarray, target: np.ndarray, joints: np.ndarray,
                rest_pull: bool | None = None) -> Iterator[tuple[int, np.ndarray, bool]]:
         """The joint targets of one action: for each of the `ik_per_action` pieces of the pose path
         from (4, 4) `start` to `target`, (piece index, joint target (7,), whether IK reached the piece).
         An unreachable piece keeps the last reachable joint target. rest_pull: the IK's null-space
-        pull towards the rest posture (`PandaKinematics.solve`); None: the current stage's, on in the
-        scoop (the policies' and demonstrations' arm) and off in the scripted stages after it."""
+        pull towards the rest posture (`PandaKinematics.solve`); None: as `set_stage` set it, on in
+        the scoop (the policies' and demonstrations' arm) and off in the scripted stages after it."""
         cfg = self.config
         if rest_pull is None:
-            rest_pull = self.tracker.stage == "scoop"
+            rest_pull = self.rest_pull
         for k in range(cfg.ik_per_action):
             pose = interpolate_pose(start, target, (k + 1) / cfg.ik_per_action)
             ik = self.kinematics.solve(pose @ self._hand_in_spoon, joints, cfg.ik_position_tolerance, cfg.ik_orientation_tolerance,
