@@ -1,4 +1,5 @@
-"""Atomic file writes: a reader never sees a half-written file, so interrupted jobs can resume."""
+"""Atomic file writes (a reader never sees a half-written file, so interrupted jobs can resume) and
+one writer per output directory (two jobs writing one directory would lose each other's records)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,10 @@ import io
 import json
 import math
 import os
+import socket
+import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -127,3 +131,78 @@ def _describe(exc: OSError, path: Path) -> str:
     if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
         return f"cannot write to {path}: permission denied or read-only file system"
     return f"cannot write {path}: {exc.strerror or exc}"
+
+
+LOCK_FILE = ".grits-lab.lock"
+
+
+@contextlib.contextmanager
+def exclusive_directory(path: str | Path, command: str) -> Iterator[Path]:
+    """Hold `path/.grits-lab.lock` while `command` writes into `path`; a second writer is refused.
+
+    The lock is an advisory `flock` on the file (the kernel releases it when its holder dies, so a
+    lock left by a killed process is taken over, with one line saying so), and the file names its
+    holder (pid, host, command, start time) for the refusal: StorageError, one line. A file system
+    without `flock` falls back to the named holder: taken over when it is a dead process of this host.
+    """
+    import fcntl
+
+    path = Path(path)
+    lock_path = path / LOCK_FILE
+    try:
+        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError as exc:
+        raise StorageError(_describe(exc, lock_path)) from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            flocked = True
+        except BlockingIOError:
+            raise StorageError(f"{path} is being written by {_holder_text(_read_holder(fd))}; "
+                               f"one writer per directory: wait for it to finish or choose another output directory") from None
+        except OSError:  # no flock here (some network file systems): trust the named holder
+            flocked = False
+        previous = _read_holder(fd)
+        if previous and not (flocked or _is_dead_here(previous)):
+            raise StorageError(f"{path} is being written by {_holder_text(previous)}; "
+                               f"one writer per directory: wait for it to finish, or remove {lock_path} if it is not running")
+        if previous:
+            print(f"grits-lab: taking over {lock_path} from {_holder_text(previous)}, which ended without releasing it", file=sys.stderr)
+        holder = {"pid": os.getpid(), "host": socket.gethostname(), "command": command,
+                  "started": time.strftime("%Y-%m-%d %H:%M:%S %z")}
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, (json.dumps(holder) + "\n").encode(), 0)
+        os.fsync(fd)
+        try:
+            yield path
+        finally:
+            os.ftruncate(fd, 0)  # an empty file is a released lock; unlinking it would race a waiting writer
+    finally:
+        os.close(fd)  # releases the flock
+
+
+def _read_holder(fd: int) -> dict[str, Any]:
+    try:
+        data = json.loads(os.pread(fd, 4096, 0).decode() or "{}")
+    except (ValueError, OSError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def _holder_text(holder: dict[str, Any]) -> str:
+    if not holder:
+        return "another process"
+    return f"`grits-lab {holder.get('command', '?')}` (pid {holder.get('pid', '?')} on {holder.get('host', '?')}, since {holder.get('started', '?')})"
+
+
+def _is_dead_here(holder: dict[str, Any]) -> bool:
+    """True when the holder is a process of this host that no longer runs."""
+    if holder.get("host") != socket.gethostname():
+        return False
+    try:
+        os.kill(int(holder.get("pid", -1)), 0)
+    except ProcessLookupError:
+        return True
+    except (OSError, ValueError):
+        return False
+    return False

@@ -66,3 +66,27 @@ def plant_pickle(tmp_path):
         return marker
 
     return plant
+
+
+@pytest.fixture
+def hold_directory():
+    """hold(path, command) starts another process that holds `path`'s writer lock as `command`
+    (grits_lab.io.exclusive_directory) and returns it once the lock is held; it is killed at teardown."""
+    import subprocess
+    import sys
+
+    code = ("import sys, time; from grits_lab.io import exclusive_directory\n"
+            "with exclusive_directory(sys.argv[1], sys.argv[2]):\n    print('held', flush=True); time.sleep(600)\n")
+    procs = []
+
+    def hold(path, command):
+        proc = subprocess.Popen([sys.executable, "-c", code, str(path), command], stdout=subprocess.PIPE, text=True)
+        procs.append(proc)
+        assert proc.stdout.readline().strip() == "held"
+        return proc
+
+    yield hold
+    for proc in procs:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()

@@ -118,3 +118,32 @@ def test_atomic_writes_get_the_mode_an_ordinary_write_gets(tmp_path):
     os.chmod(tmp_path / "report.html", 0o664)
     write_text_atomic(tmp_path / "report.html", "<html>again</html>")
     assert mode(tmp_path / "report.html") == 0o664
+
+
+def test_one_writer_per_directory_a_second_is_refused_naming_the_first(tmp_path, hold_directory):
+    from grits_lab.io import exclusive_directory
+
+    holder = hold_directory(tmp_path, "collect")
+    with pytest.raises(StorageError) as refused:
+        with exclusive_directory(tmp_path, "evaluate"):
+            pass
+    assert f"is being written by `grits-lab collect` (pid {holder.pid} on " in str(refused.value)
+    assert "\n" not in str(refused.value)
+
+
+def test_a_lock_its_holder_left_behind_is_taken_over_with_one_line(tmp_path, capsys):
+    import json
+    import socket
+
+    from grits_lab.io import LOCK_FILE, exclusive_directory
+
+    (tmp_path / LOCK_FILE).write_text(json.dumps({"pid": 2 ** 22 + 7, "host": socket.gethostname(), "command": "train policy", "started": "x"}))
+    with exclusive_directory(tmp_path, "train policy"):
+        held = json.loads((tmp_path / LOCK_FILE).read_text())
+    assert held["pid"] == os.getpid()
+    assert (tmp_path / LOCK_FILE).read_text() == ""  # released
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"taking over {tmp_path / LOCK_FILE} from `grits-lab train policy` (pid {2 ** 22 + 7}" in err[0]
+    with exclusive_directory(tmp_path, "evaluate"):  # a released lock: taken without a word
+        pass
+    assert capsys.readouterr().err == ""

@@ -33,27 +33,39 @@ def run_collection(config: Any, progress: bool = True) -> dict[str, Any]:
     Everything that can be checked is checked before the dataset directory is touched: the
     episode plan (names of foods and levels), an existing dataset's config, and the Ray cluster.
     """
-    from grits_lab.collection.driver import DatasetWriter, existing_manifest, run_fixed_job
-    from grits_lab.runners.executor_config import check_reachable, cluster_address, make_executor
+    from grits_lab.collection.driver import existing_manifest
+    from grits_lab.io import ensure_writable_dir, exclusive_directory
+    from grits_lab.runners.executor_config import check_reachable, cluster_address
 
     existing_manifest(config.output_dir, config.kind, config.identity())
+    specs, given_base = None, None
     if config.kind == "demos":
         from grits_lab.collection.demos import plan_demos
 
         specs = plan_demos(config)
-        check_reachable(cluster_address(config.executor))
-        writer = DatasetWriter(config.output_dir, config.kind, config.identity())
+    elif config.base_trajectory is not None:  # a file or dataset the user named: read (and refused) before the directory exists
+        given_base = base_trajectory(config)
+    check_reachable(cluster_address(config.executor))
+    out = ensure_writable_dir(config.output_dir)
+    with exclusive_directory(out, "collect"):  # one collector per dataset: two would write the same episodes
+        return _collect_in(config, specs, given_base, progress)
+
+
+def _collect_in(config: Any, specs: list[Any] | None, given_base: np.ndarray | None, progress: bool) -> dict[str, Any]:
+    from grits_lab.collection.driver import DatasetWriter, run_fixed_job
+    from grits_lab.runners.executor_config import make_executor
+
+    writer = DatasetWriter(config.output_dir, config.kind, config.identity())
+    if specs is not None:
         with make_executor(config.executor) as executor:
             return run_fixed_job(executor, writer, specs, desc="demos", spilled_of=lambda m: m.get("spilled_any"), progress=progress)
     from grits_lab.collection.spillage_trials import BASE_TRAJECTORY_FILE, run_spillage_job, source_bowl_region
 
-    check_reachable(cluster_address(config.executor))
-    writer = DatasetWriter(config.output_dir, config.kind, config.identity())
     base_path = writer.out_dir / BASE_TRAJECTORY_FILE
     if base_path.exists():
-        base = np.load(base_path)  # the one this dataset started with: resume stays identical
+        base = np.load(base_path, allow_pickle=False)  # the one this dataset started with: resume stays identical
     else:
-        base = base_trajectory(config)
+        base = given_base if given_base is not None else base_trajectory(config)
         from grits_lab.io import atomic_path
 
         with atomic_path(base_path) as tmp:
@@ -82,7 +94,7 @@ def base_trajectory(config: Any) -> np.ndarray:
         return mean_trajectory(actions)
     if path.suffix == ".npy" and path.is_file():
         try:
-            return as_pose9(np.load(path))
+            return as_pose9(np.load(path, allow_pickle=False))
         except ValueError as exc:
             raise InputError(f"base_trajectory {path}: {exc}") from None
     raise InputError(f"base_trajectory must be a .npy file or a dataset directory; not found: {path}")

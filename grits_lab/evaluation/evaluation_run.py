@@ -4,7 +4,10 @@ Run directory (the report layer's contract, docs/report.md): `episodes.parquet` 
 finished episode, rewritten atomically every `flush_every` episodes and at the end),
 `config.yaml` (the resolved config) and `provenance.json` (code version, checkpoint digests,
 episode plan). Running the same config again skips every episode already in `episodes.parquet`,
-identified by (method, food, level, trial, seed, rho, s), and only runs the rest.
+identified by (method, food, level, trial, seed, rho, s), and only runs the rest; records made with
+other checkpoint files (digests) than the config's are refused, never resumed. One `evaluate` writes
+a run directory at a time (grits_lab.io.exclusive_directory); runs one after another merge, and
+config.yaml and provenance.json describe every method in the records.
 
 Every method sees the same episode seeds, derive_seed(root, food, level, trial), so a difference
 between methods is the method's and not the luck of the draw.
@@ -31,7 +34,7 @@ from grits_lab.evaluation.grid import EpisodeKey
 from grits_lab.evaluation.methods import (
     METHODS, check_method_checkpoints, file_digest, guidance_columns, method_checkpoints, method_spec,
 )
-from grits_lab.io import ensure_writable_dir, save_parquet_atomic, write_json_atomic, write_text_atomic
+from grits_lab.io import ensure_writable_dir, exclusive_directory, save_parquet_atomic, write_json_atomic, write_text_atomic
 from grits_lab.records import RECORD_COLUMNS
 from grits_lab.runners import EpisodeResult, EpisodeSpec, make_executor
 from grits_lab.runners.base import Executor
@@ -186,7 +189,39 @@ def _load_existing(path: Path) -> list[dict[str, Any]]:
     return frame.to_dict("records")
 
 
-def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], digests: dict[str, str], n_episodes: int) -> dict[str, Any]:
+def _refuse_other_checkpoints(records_path: Path, done: list[dict[str, Any]], paths: dict[str, dict[str, str]],
+                              digests: dict[str, str]) -> None:
+    """A method's records made with other checkpoint files than the config's now are not resumed
+    under the new ones: InputError naming the key, both digests and the way out."""
+    for method, by_key in paths.items():
+        for key, path in by_key.items():
+            recorded = {str(r.get(f"checkpoint_{key}")) for r in done if r["method"] == method and _present(r.get(f"checkpoint_{key}"))}
+            other = sorted(recorded - {digests[path]})
+            if other:
+                raise InputError(
+                    f"{records_path} holds `{method}` episodes made with `checkpoints.{key}` digest {other[0]}, but "
+                    f"{path} has digest {digests[path]}; rerun with --restart to discard the records, or choose another output_dir")
+
+
+def _present(value: Any) -> bool:
+    return value is not None and not (isinstance(value, float) and math.isnan(value))
+
+
+def _earlier_methods(out: Path, recorded_methods: list[str]) -> dict[str, Any]:
+    """The provenance entries of methods already in the records, as an earlier run wrote them."""
+    import json
+
+    try:
+        earlier = json.loads((out / "provenance.json").read_text()).get("methods", {})
+    except (OSError, ValueError, AttributeError):
+        return {}
+    return {m: earlier[m] for m in recorded_methods if isinstance(earlier, dict) and m in earlier}
+
+
+def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], digests: dict[str, str], n_episodes: int,
+               earlier: dict[str, Any] | None = None) -> dict[str, Any]:
+    """What produced the records; `earlier`: entries of methods recorded by earlier runs into the same
+    directory, kept (under the current entry where this run evaluates the method again)."""
     from grits_lab.versions import git_commit, package_versions
 
     return {
@@ -194,8 +229,9 @@ def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], diges
         "started (UTC)": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S"),
         "code git commit": git_commit(),
         "config fingerprint": config_fingerprint(config),
-        "methods": {m: {"description": method_spec(m, config).description, "checkpoints": {k: {"path": p, "sha256_16": digests[p]} for k, p in paths[m].items()},
-                        "rho_s": list(guidance_columns(m, config))} for m in config.methods},
+        "methods": {**(earlier or {}),
+                    **{m: {"description": method_spec(m, config).description, "checkpoints": {k: {"path": p, "sha256_16": digests[p]} for k, p in paths[m].items()},
+                           "rho_s": list(guidance_columns(m, config))} for m in config.methods}},
         "guidance": config_to_dict(config.guidance),
         "posthoc": config_to_dict(config.posthoc),
         "root seed": config.seed,
@@ -217,12 +253,22 @@ def evaluate(config: EvaluationConfig, *, progress: bool = True, restart: bool =
     if executor is None:
         check_reachable(cluster_address(config.executor))
     out = ensure_writable_dir(config.output_dir)  # only once the run is known to be possible
+    with exclusive_directory(out, "evaluate"):
+        return _evaluate_in(out, config, specs, paths, digests, progress, restart, executor)
+
+
+def _evaluate_in(out: Path, config: EvaluationConfig, specs: list[EpisodeSpec], paths: dict[str, dict[str, str]],
+                 digests: dict[str, str], progress: bool, restart: bool, executor: Executor | None) -> pd.DataFrame:
+    """`evaluate` once it holds the run directory: resume, write what describes the records, run the rest."""
     records_path = out / RECORDS_FILE
-    write_text_atomic(out / "config.yaml", yaml.safe_dump(config_to_dict(config), sort_keys=False))
-    write_json_atomic(out / "provenance.json", provenance(config, paths, digests, len(specs)))
+    done = [] if restart else _load_existing(records_path)
+    _refuse_other_checkpoints(records_path, done, paths, digests)
+    recorded_methods = list(dict.fromkeys(str(r["method"]) for r in done))
+    described = replace(config, methods=list(dict.fromkeys([*recorded_methods, *config.methods])))
+    write_text_atomic(out / "config.yaml", yaml.safe_dump(config_to_dict(described), sort_keys=False))
+    write_json_atomic(out / "provenance.json", provenance(config, paths, digests, len(specs), earlier=_earlier_methods(out, recorded_methods)))
     if restart and records_path.exists():
         records_path.unlink()
-    done = _load_existing(records_path)
     finished = {identity_of(r) for r in done}
     todo = []
     for spec in specs:

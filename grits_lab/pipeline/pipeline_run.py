@@ -20,7 +20,7 @@ from typing import Any
 import yaml
 
 from grits_lab.config import load_yaml, merge_mappings
-from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
+from grits_lab.io import ensure_writable_dir, exclusive_directory, write_json_atomic, write_text_atomic
 from grits_lab.pipeline.pipeline_config import UPSTREAM, PipelineConfig
 from grits_lab.pipeline.stages import Layout, check, run, wire
 
@@ -66,6 +66,12 @@ def run_pipeline(config: PipelineConfig, only: list[str] | None = None, force: l
         if not only or stage in only:
             check(stage, texts, config.stages[stage].config)
     ensure_writable_dir(layout.root)
+    with exclusive_directory(layout.root, "pipeline"):  # one pipeline per output directory: two would race on its state
+        return _run_stages(config, layout, stages, texts, only, force, progress)
+
+
+def _run_stages(config: PipelineConfig, layout: Layout, stages: list[str], texts: dict[str, str],
+                only: list[str] | None, force: list[str] | None, progress: bool) -> dict[str, Any]:
     ensure_writable_dir(layout.configs)
     state = load_state(layout.root)
     fingerprints: dict[str, str] = {}

@@ -25,7 +25,7 @@ from tqdm import tqdm
 
 from grits_lab.config import config_fingerprint, config_to_dict, require
 from grits_lab.errors import ConfigError, StorageError
-from grits_lab.io import ensure_writable_dir, write_text_atomic
+from grits_lab.io import ensure_writable_dir, exclusive_directory, write_text_atomic
 from grits_lab.policies.control import RolloutSettings, RolloutsFactory, rollout_episodes
 from grits_lab.policies.diffusion.demo_windows import DemoWindowDataset, dataset_fingerprint, list_demo_episodes, split_demo_episodes
 from grits_lab.training import (
@@ -128,11 +128,12 @@ def train_on_demonstrations(
     if config.num_processes > 1 and device.type != "cpu":
         print(f"num_processes: {config.num_processes} splits batches over CPU cores; training in one process on {device}",
               file=sys.stderr)
-    if config.num_processes == 1 or device.type != "cpu":
-        return _train(0, 1, config, make_policy, desc, rollout, rollouts, max_steps, progress, restart)
-    list_demo_episodes(config.dataset, tuple(config.splits))  # a missing dataset fails here, before processes start
+    list_demo_episodes(config.dataset, tuple(config.splits))  # a missing dataset fails here, before any directory or process
     out = ensure_writable_dir(config.output_dir)
-    return run_processes(_train, config.num_processes, (config, make_policy, desc, None, None, max_steps, progress, restart), out)
+    with exclusive_directory(out, desc):  # one trainer per run directory: two would overwrite each other's last.pt
+        if config.num_processes == 1 or device.type != "cpu":
+            return _train(0, 1, config, make_policy, desc, rollout, rollouts, max_steps, progress, restart)
+        return run_processes(_train, config.num_processes, (config, make_policy, desc, None, None, max_steps, progress, restart), out)
 
 
 def _train(

@@ -24,7 +24,7 @@ from grits_lab.config import config_fingerprint, config_to_dict
 from grits_lab.data.format import LEGACY_CHUNK_KEY, with_chunk_key
 from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import ConfigError
-from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
+from grits_lab.io import ensure_writable_dir, exclusive_directory, write_json_atomic, write_text_atomic
 from grits_lab.seeding import derive_seed
 from grits_lab.spillage.predictor_checkpoint import TrainedPredictor, read_checkpoint, save_predictor
 from grits_lab.spillage.predictor_config import PredictorConfig
@@ -70,13 +70,18 @@ def predict(model: SpillagePredictor, dataset: SpillageChunkDataset, batch_size:
 
 def train_predictor(config: PredictorConfig, restart: bool = False, progress: bool = True) -> dict[str, Any]:
     """Train (or resume) the run of `config`; returns the best epoch's validation metrics and paths."""
+    torch.set_num_threads(config.train.num_threads)
+    index = check_spillage_dataset(Path(config.data.dataset), config.model.n_action_steps)
+    out = ensure_writable_dir(run_dir(config))
+    with exclusive_directory(out, "train predictor"):  # one trainer per run: two would overwrite each other's last.pt
+        return _train_in(out, config, index, restart, progress)
+
+
+def _train_in(out: Path, config: PredictorConfig, index: Any, restart: bool, progress: bool) -> dict[str, Any]:
     from tqdm import tqdm
 
-    torch.set_num_threads(config.train.num_threads)
     fingerprint, legacy_fingerprint = _resume_fingerprints(config)
     dataset_dir = Path(config.data.dataset)
-    index = check_spillage_dataset(dataset_dir, config.model.n_action_steps)
-    out = ensure_writable_dir(run_dir(config))
     last_path, best_path = out / "last.pt", out / "best.pt"
     cloud_key = CLOUD_KEYS[config.data.cloud_source]
     split = split_spillage_episodes(index, config.data.val_fraction, config.data.split_seed, config.data.holdout_shape)

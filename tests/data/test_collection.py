@@ -188,3 +188,24 @@ def test_damaged_episode_file_is_reported_and_regenerated(tmp_path, capsys):
 
     found = re.match(r"incomplete \((\w+)/(\d) has (\d+) of (\d+)", status)
     assert found and int(found[3]) == int(found[4]) - 1, status
+
+
+def test_a_second_collector_on_one_dataset_is_refused_before_it_writes(tmp_path, hold_directory):
+    from grits_lab.errors import StorageError
+
+    config = _short_spillage_config(tmp_path)
+    (tmp_path / "spill").mkdir()
+    holder = hold_directory(tmp_path / "spill", "collect")
+    with pytest.raises(StorageError, match=rf"spill is being written by `grits-lab collect` \(pid {holder.pid} on"):
+        run_collection(config, progress=False)
+    assert [p.name for p in (tmp_path / "spill").iterdir()] == [".grits-lab.lock"]
+
+
+def test_a_base_trajectory_that_is_not_a_pose_array_is_refused_before_the_dataset_exists(tmp_path):
+    from grits_lab.errors import InputError
+
+    np.save(tmp_path / "objects.npy", np.array([{"a": 1}], dtype=object))
+    config = _short_spillage_config(tmp_path, base_trajectory=str(tmp_path / "objects.npy"))
+    with pytest.raises(InputError, match="objects.npy"):
+        run_collection(config, progress=False)
+    assert not (tmp_path / "spill").exists()

@@ -214,3 +214,14 @@ def test_a_planted_pickle_is_refused_on_resume_and_by_eval_and_never_runs(tmp_pa
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(last) in err[0] and "refused" in err[0]
     assert not marker.exists()
+
+
+def test_a_second_trainer_of_one_run_is_refused_naming_the_first(tmp_path, tiny_dataset, hold_directory):
+    from grits_lab.errors import StorageError
+
+    run = tmp_path / "runs" / "tiny"
+    run.mkdir(parents=True)
+    holder = hold_directory(run, "train predictor")
+    with pytest.raises(StorageError, match=rf"is being written by `grits-lab train predictor` \(pid {holder.pid} on"):
+        train_predictor(_config(tmp_path, tiny_dataset, epochs=1), progress=False)
+    assert [p.name for p in run.iterdir()] == [".grits-lab.lock"]
