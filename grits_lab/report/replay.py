@@ -162,6 +162,17 @@ def checked_checkpoints(method: str, config: Any, record: dict[str, Any]) -> dic
     return paths
 
 
+def attribution_caption(attribution: dict[str, int]) -> str:
+    """One caption line naming where the spilled particles were lost, e.g. "lost: carry, off the moving
+    spoon 2 · pour, poured outside the target 1" ("" when nothing is spilled); keys as `attribution_columns`."""
+    from grits_lab.report.spill_tables import CAUSE_NAMES
+    from grits_lab.sim.spill_metrics import attribution_columns
+
+    columns = attribution_columns()
+    parts = [f"{columns[c][0].replace('_', ' ')}, {CAUSE_NAMES[columns[c][1]].lower()} {n}" for c, n in attribution.items() if n]
+    return "lost: " + " · ".join(parts) if parts else ""
+
+
 class _FilmedEnv:
     """A ScoopEnv seen through a camera: renders a captioned frame after the reset and after every action."""
 
@@ -182,7 +193,9 @@ class _FilmedEnv:
         if step % self._every:
             return
         frame = render_frame(self._env, self._camera)
-        self.frames.append(caption(frame, [self._title, f"step {step:>3}   spilled {int(info.get('spilled', 0))}"]))
+        lines = [self._title, f"step {step:>3}   {self._env.tracker.stage.replace('_', ' ')}   spilled {int(info.get('spilled', 0))}"]
+        lost = attribution_caption(self._env.metrics()["spill_attribution"])
+        self.frames.append(caption(frame, lines + ([lost] if lost else [])))
 
     def reset(self, *args: Any, **kwargs: Any) -> Any:
         obs, info = self._env.reset(*args, **kwargs)

@@ -108,7 +108,7 @@ def delivery_table(episodes: pd.DataFrame | None) -> ReportTable:
         if len(variants) == 1:
             for (food, level), g in sorted(rows.groupby(["food", "level"]),
                                            key=lambda kv: (food_display(kv[0][0]), LEVEL_ORDER.index(kv[0][1]) if kv[0][1] in LEVEL_ORDER else 9)):
-                groups.append((food_display(food), level, g))
+                groups.append((food_display(food, long=True), level, g))
         for food, level, g in groups:
             scooped = pd.to_numeric(g["scooped"], errors="coerce")
             share = pd.to_numeric(g["transferred"], errors="coerce") / scooped
