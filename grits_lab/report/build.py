@@ -37,6 +37,7 @@ from grits_lab.report.render import (
     to_json_text,
     write_csv,
 )
+from grits_lab.report.spill_tables import delivery_table, load_loss_figure, spill_attribution_table
 from grits_lab.report.sweep import summarize_sweep, sweep_tables
 from grits_lab.report.tables import (
     ReportTable,
@@ -142,7 +143,12 @@ def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Sec
             items.append(_figure("fig6_per_food", fig6.title, fig6.caption,
                                  figures.per_food_stacks(fig6.data, out / "figures" / "fig6_per_food.png", fig6.title), result))
         sections.append(Section("Fig. 6: per food", items))
-        sections.append(Section("Why tasks failed", [_table(failure_table(episodes), out, result)]))
+        lost = [_table(failure_table(episodes), out, result), _table(spill_attribution_table(episodes), out, result),
+                _table(delivery_table(episodes), out, result)]
+        if (loss_png := load_loss_figure(episodes, out / "figures" / "load_loss.png")) is not None:
+            lost.append(_figure("load_loss", "Food lost after the scoop against the heap above the spoon's rim",
+                                "One point per episode that lifted food, coloured by the stage that lost it.", loss_png, result))
+        sections.append(Section("Why tasks failed", lost))
         sections.append(Section("Fig. 8: predictor ablation", [
             _table(fig8, out, result),
             _figure("fig8_ablation", fig8.title, "Bars: simulation; error bars: Wilson 95%.",

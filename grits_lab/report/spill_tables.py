@@ -8,6 +8,7 @@ columns existed give an empty table, never zeros.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pandas as pd
 
@@ -135,3 +136,43 @@ def delivery_table(episodes: pd.DataFrame | None) -> ReportTable:
     return ReportTable("delivery", "Delivery after the scoop: how much of the lifted load reached the target bowl",
                        "Per method over the episodes that lifted food; per food and level for a run of one method.",
                        pd.DataFrame(display_rows), pd.DataFrame(data_rows), notes)
+
+
+def load_loss_figure(episodes: pd.DataFrame, path: Path) -> Path | None:
+    """Scatter of what each episode lost after the scoop against the heap its scoop left above the
+    spoon's rim (`above_spoon_rim`), one colour per stage that lost it (grey: nothing lost), one
+    panel per method; None when the records lack the columns. Answers whether a carry sheds only
+    heaped loads (a real spoon's behaviour) or level ones too (a simulation artefact)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from grits_lab.io import atomic_path
+
+    if episodes is None or episodes.empty or not has_attribution(episodes) or "above_spoon_rim" not in episodes.columns:
+        return None
+    variants = all_variants(episodes)
+    fig, axes = plt.subplots(1, len(variants), figsize=(min(4.2 * len(variants), 12.5), 3.4), squeeze=False, sharey=True)
+    colours = {"lift": "tab:orange", "carry": "tab:red", "pour": "tab:purple", "after_pour": "tab:brown"}
+    for ax, (variant, name) in zip(axes[0], variants):
+        rows = episodes[(episodes["variant"] == variant) & ~episodes["is_error"]]
+        rows = rows[pd.to_numeric(rows["scooped"], errors="coerce") > 0]
+        counts = attribution_counts(rows)
+        heap = pd.to_numeric(rows["above_spoon_rim"], errors="coerce").to_numpy()
+        lost = spilled_after_scoop(rows).to_numpy()
+        ax.scatter(heap[lost == 0], lost[lost == 0], s=14, color="0.65", label="nothing lost")
+        for stage, colour in colours.items():
+            by_stage = counts[[c for c, (st, _) in attribution_columns().items() if st == stage]].sum(axis=1).to_numpy()
+            if (by_stage > 0).any():
+                ax.scatter(heap[by_stage > 0], by_stage[by_stage > 0], s=18, color=colour, label=STAGE_NAMES[stage])
+        ax.set_title(name, fontsize=9)
+        ax.set_xlabel("particles above the spoon's rim after the scoop")
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("particles lost after the scoop")
+    axes[0][-1].legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+    return path

@@ -74,3 +74,12 @@ def test_the_replay_caption_names_stage_cause_and_count_of_what_was_lost():
     assert attribution_caption(lost) == ""
     lost.update({"spilled_carry_off_spoon": 2, "spilled_pour_poured_outside": 1})
     assert attribution_caption(lost) == "lost: carry, off the moving spoon 2 · pour, poured outside the target 1"
+
+
+def test_the_load_loss_figure_is_drawn_from_the_records_and_skipped_without_them(tmp_path):
+    from grits_lab.report.spill_tables import load_loss_figure
+
+    run = _run([("dp", "sago", 20, 18, {"spilled_carry_off_spoon": 2}), ("dp", "penne", 10, 10, {})])
+    assert load_loss_figure(run, tmp_path / "loss.png") == tmp_path / "loss.png" and (tmp_path / "loss.png").stat().st_size > 0
+    bare = normalize_records(pd.DataFrame([episode("dp", "sago", "low", 0, "success")]))
+    assert load_loss_figure(bare, tmp_path / "none.png") is None and not (tmp_path / "none.png").exists()
