@@ -194,9 +194,22 @@ class ScoopEnv:
         self.max_joint_speed_ratio = 0.0
         self.rest_pull = True
         counts = self._classify()
+        self._refuse_unsettled(counts.outside_source)
         self.tracker.observe(counts)
         self.initial_outside = int(counts.outside_source.sum())
         return self._obs(), self._info(ik_failure=False)
+
+    def _refuse_unsettled(self, outside: np.ndarray) -> None:
+        """InputError when particles came to rest outside the source bowl before any action: a food
+        that does not fit the bowl, whose losses would otherwise be scored as the policy's spill."""
+        if not outside.any():
+            return
+        w = self._require_world()
+        below = int((w.particle_positions()[outside, 2] < -0.01).sum())
+        raise InputError(
+            f"food {self.food_name!r} (level {self.level!r}, seed {self.seed}): {int(outside.sum())} of {len(outside)} particles "
+            f"came to rest outside the source bowl after settling ({below} below the table), before any action; "
+            "the food does not fit the bowl: use fewer or smaller particles")
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         """Move the spoon towards the 9-D pose `action` for one control period (1 / control_hz s)."""
