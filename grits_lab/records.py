@@ -16,6 +16,7 @@ UNSEEN_FOODS: tuple[str, ...] = (
 # name -> meaning. Every evaluation record has at least these columns.
 RECORD_COLUMNS: dict[str, str] = {
     "run_id": "identifier of the evaluation or sweep run that produced the row",
+    "protocol": "task and evaluation protocol the episode ran under, e.g. scoop-v4 (grits_lab/versions.py, docs/protocol.md)",
     "method": "method name, e.g. rule_based, bc, scone, dp, dp_post, grits, grits_raw, grits_pointnet2",
     "food": "food name from the food library, e.g. sago",
     "split": "train or unseen",
@@ -38,3 +39,24 @@ RECORD_COLUMNS: dict[str, str] = {
 }
 
 OUTCOME_COLUMNS = ("task_success", "spillage", "scoop_failure")
+
+# Records written before the `protocol` column existed: those that carry the stage x cause spill
+# columns (`spilled_scoop_<cause>`, ...) were made by scoop-v4's code, which introduced them.
+FIRST_RECORDED_PROTOCOL = "scoop-v4"
+UNVERSIONED = "unversioned (before scoop-v4)"
+
+
+def with_protocol(frame):
+    """`frame`, the records of one file, with every row's `protocol` set (a copy; pandas DataFrame).
+
+    A row without one predates the column: it gets FIRST_RECORDED_PROTOCOL when the file has the
+    stage x cause spill columns that version introduced, UNVERSIONED otherwise (docs/protocol.md).
+    """
+    inferred = FIRST_RECORDED_PROTOCOL if any(str(c).startswith("spilled_scoop_") for c in frame.columns) else UNVERSIONED
+    frame = frame.copy()
+    if "protocol" not in frame.columns:
+        frame["protocol"] = inferred
+    else:
+        recorded = frame["protocol"]
+        frame["protocol"] = recorded.where(recorded.notna() & (recorded.astype(str).str.strip() != ""), inferred).astype(str)
+    return frame

@@ -1,7 +1,13 @@
-"""What code produced a result: the git commit of the checkout holding grits_lab, and package versions.
+"""What code produced a result: the task protocol's version, the git commit of the checkout holding
+grits_lab, and package versions.
 
-Read from git and from installed package metadata, so no heavy package is imported. Evaluation
-runs write them into provenance.json; reports add them for the code that drew the report.
+`PROTOCOL` names the task and its evaluation protocol (the world, the scripted stages, the
+metrics and what a record holds), versioned as Gymnasium versions its envs: every change that
+can move a result bumps `PROTOCOL_VERSION`, and docs/protocol.md lists each version, what changed
+and which results it superseded. Every episode record, dataset manifest, checkpoint and report
+stores it. Git and package versions are read from git and installed metadata, so no heavy
+package is imported. Evaluation runs write them into provenance.json; reports add them for the
+code that drew the report.
 """
 
 from __future__ import annotations
@@ -10,6 +16,9 @@ import platform
 import subprocess
 from importlib import metadata
 from pathlib import Path
+
+PROTOCOL_VERSION = 4
+PROTOCOL = f"scoop-v{PROTOCOL_VERSION}"
 
 PACKAGES = ("grits-lab", "numpy", "pandas", "pyarrow", "matplotlib", "jinja2", "torch", "pybullet", "ray", "optuna", "open3d-cpu", "open3d")
 

@@ -30,6 +30,7 @@ from grits_lab.data.format import (
 )
 from grits_lab.errors import StorageError
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
+from grits_lab.versions import PROTOCOL
 
 FAILURE_DIR = "failures"
 # The code that determines episode contents: a dataset resumed after it changed mixes two versions.
@@ -66,7 +67,8 @@ def collection_identity(config: Any) -> dict[str, Any]:
 def existing_manifest(out_dir: str | Path, kind: str, identity: Any) -> dict[str, Any] | None:
     """The manifest of the dataset at `out_dir` (None: no dataset there yet); writes nothing.
 
-    A dataset made from another config (or of another kind) is refused: resuming it would mix two.
+    A dataset made from another config (or of another kind, or under another task protocol) is
+    refused: resuming it would mix two.
     """
     manifest_path = Path(out_dir) / MANIFEST_FILE
     if not manifest_path.exists():
@@ -82,6 +84,9 @@ def existing_manifest(out_dir: str | Path, kind: str, identity: Any) -> dict[str
             f"{out_dir} holds a {manifest.get('kind')} dataset made with a different config "
             f"(fingerprint {manifest.get('fingerprint')} vs {fingerprint}); choose another output or remove it"
         )
+    if manifest.get("protocol", PROTOCOL) != PROTOCOL:  # a manifest written before the key existed is not refused
+        raise StorageError(f"{out_dir} holds a dataset of protocol {manifest['protocol']}, but this code runs {PROTOCOL} "
+                           "(docs/protocol.md); choose another output or remove it")
     return manifest
 
 
@@ -113,6 +118,7 @@ class DatasetWriter:
             self.manifest = {
                 "format_version": FORMAT_VERSION,
                 "kind": kind,
+                "protocol": PROTOCOL,
                 "fingerprint": self.fingerprint,
                 "config": config_to_dict(identity),
                 "code_hash": data_code_hash(),

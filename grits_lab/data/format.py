@@ -2,8 +2,9 @@
 
 Layout of a dataset directory::
 
-    dataset.yaml          manifest: format_version, kind ("demos" or "spillage"), the collection
-                          config and its fingerprint
+    dataset.yaml          manifest: format_version, kind ("demos" or "spillage"), the task protocol
+                          it was collected under (grits_lab/versions.py), the collection config
+                          and its fingerprint
     episodes/<id>.npz     one episode; arrays plus a `meta` entry holding a JSON object
     index.parquet         one row per episode: the scalar entries of each episode's meta
 

@@ -10,6 +10,7 @@ import yaml
 from grits_lab.data.format import EPISODE_DIR, MANIFEST_FILE, load_index, rebuild_index
 from grits_lab.errors import StorageError
 from grits_lab.sim.spill_metrics import attribution_columns
+from grits_lab.records import UNVERSIONED
 
 
 def dataset_summary(path: str | Path) -> dict[str, Any]:
@@ -27,6 +28,7 @@ def dataset_summary(path: str | Path) -> dict[str, Any]:
         "path": str(path),
         "kind": manifest.get("kind"),
         "format_version": manifest.get("format_version"),
+        "protocol": manifest.get("protocol", UNVERSIONED),
         "status": manifest.get("status"),
         "episodes": int(len(index)),
         "failed": len(list((path / "failures").glob("*.json"))),

@@ -35,10 +35,11 @@ from grits_lab.evaluation.methods import (
     METHODS, check_method_checkpoints, file_digest, guidance_columns, method_checkpoints, method_spec,
 )
 from grits_lab.io import ensure_writable_dir, exclusive_directory, save_parquet_atomic, write_json_atomic, write_text_atomic
-from grits_lab.records import RECORD_COLUMNS
+from grits_lab.records import RECORD_COLUMNS, with_protocol
 from grits_lab.runners import EpisodeResult, EpisodeSpec, make_executor
 from grits_lab.runners.base import Executor
 from grits_lab.runners.executor_config import check_reachable, cluster_address
+from grits_lab.versions import PROTOCOL
 
 RECORDS_FILE = "episodes.parquet"
 IDENTITY = ("method", "food", "level", "trial", "seed", "rho", "s")
@@ -107,10 +108,10 @@ def failed_episode_record(spec: EpisodeSpec, error: str, wall_time_s: float) -> 
 
 
 def result_record(result: EpisodeResult) -> dict[str, Any]:
+    """The episode's record, stamped with the task protocol this code runs (grits_lab/versions.py)."""
     assert result.spec is not None
-    if result.ok:
-        return dict(result.payload)
-    return failed_episode_record(result.spec, result.error, result.wall_time_s)
+    record = dict(result.payload) if result.ok else failed_episode_record(result.spec, result.error, result.wall_time_s)
+    return {**record, "protocol": PROTOCOL}
 
 
 def records_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
@@ -186,7 +187,16 @@ def _load_existing(path: Path) -> list[dict[str, Any]]:
         frame = pd.read_parquet(path)
     except Exception as exc:  # pyarrow raises many types on a damaged file
         raise StorageError(f"cannot read {path} to resume: {exc}; move it away to start over") from None
-    return frame.to_dict("records")
+    return with_protocol(frame).to_dict("records")
+
+
+def _refuse_other_protocol(records_path: Path, done: list[dict[str, Any]]) -> None:
+    """Records of another task protocol are not resumed under this one (a run directory holds one
+    protocol): InputError naming both and the way out."""
+    other = sorted({str(r["protocol"]) for r in done} - {PROTOCOL})
+    if other:
+        raise InputError(f"{records_path} holds episodes of protocol {other[0]}, but this code runs {PROTOCOL} (docs/protocol.md); "
+                         "rerun with --restart to discard them, or choose another output_dir")
 
 
 def _refuse_other_checkpoints(records_path: Path, done: list[dict[str, Any]], paths: dict[str, dict[str, str]],
@@ -226,6 +236,7 @@ def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], diges
 
     return {
         "run_id": config.run_id,
+        "protocol": PROTOCOL,
         "started (UTC)": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S"),
         "code git commit": git_commit(),
         "config fingerprint": config_fingerprint(config),
@@ -262,6 +273,7 @@ def _evaluate_in(out: Path, config: EvaluationConfig, specs: list[EpisodeSpec], 
     """`evaluate` once it holds the run directory: resume, write what describes the records, run the rest."""
     records_path = out / RECORDS_FILE
     done = [] if restart else _load_existing(records_path)
+    _refuse_other_protocol(records_path, done)
     _refuse_other_checkpoints(records_path, done, paths, digests)
     recorded_methods = list(dict.fromkeys(str(r["method"]) for r in done))
     described = replace(config, methods=list(dict.fromkeys([*recorded_methods, *config.methods])))

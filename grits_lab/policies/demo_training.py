@@ -33,6 +33,7 @@ from grits_lab.training import (
     warmup_cosine,
 )
 from grits_lab.training.data_parallel import batch_share, reduce_gradients, run_processes
+from grits_lab.versions import PROTOCOL
 
 
 @dataclass
@@ -207,6 +208,7 @@ def _train(
         if not lead:
             return
         state = {
+            "protocol": PROTOCOL,  # the task protocol of the code that trained it (docs/protocol.md)
             "policy": policy.policy_state(),  # type: ignore[operator]
             "ema": ema.state_dict() if ema is not None else None,
             "optimizer": optimizer.state_dict(),

@@ -23,7 +23,7 @@ from typing import Any, Callable, Sequence
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
 from grits_lab.report import figures
 from grits_lab.report.run_records import RunData, load_run
-from grits_lab.report.provenance import episode_counts, error_messages, report_provenance
+from grits_lab.report.provenance import episode_counts, error_messages, protocol_summary, report_provenance
 from grits_lab.report.guidance_effect import guidance_by_plan_table, guidance_figure, guidance_table, guided_episodes
 from grits_lab.report.headline import headline_sentence, headline_table
 from grits_lab.report.render import (
@@ -99,6 +99,7 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also
         f"them. Labels: '{SIM_LABEL}' for this run, '{PAPER_LABEL}' for the paper. Rates carry Wilson 95% "
         "intervals and episode counts; a method or food without records is shown as — and listed below, never as zero."
         + (f" Records of {', '.join(str(p) for p in run.also_runs)} are reported beside this run's." if run.also_runs else ""),
+        f"Task protocol: {protocol_summary(run.episodes)} (docs/protocol.md).",
         Collapsed(f"Missing data: {len(missing)} notes (click to list)", missing) if missing else "Missing data: none.",
     ])
     sections.insert(0, overview)

@@ -14,7 +14,20 @@ from typing import Any
 import pandas as pd
 
 from grits_lab.report.run_records import RunData
-from grits_lab.versions import git_commit, package_versions
+from grits_lab.versions import PROTOCOL, git_commit, package_versions
+
+
+def protocol_summary(episodes: pd.DataFrame | None) -> str:
+    """The task protocol of the records: `scoop-v4`, or each protocol with its episode count when
+    they hold several (every method's rows then carry their protocol in their label)."""
+    if episodes is None or episodes.empty or "protocol" not in episodes.columns:
+        return "no episode records"
+    counts = episodes["protocol"].astype(str).value_counts().sort_index()
+    if len(counts) == 1:
+        return str(counts.index[0])
+    listed = ", ".join(f"{protocol} ({n} episodes)" for protocol, n in counts.items())
+    return f"{listed}; every method's rows are labelled with their protocol and never pooled"
+
 
 def seed_summary(episodes: pd.DataFrame | None) -> dict[str, Any]:
     """Distinct seeds, their range, and whether every method saw the same (food, level, trial) -> seed map."""
@@ -67,6 +80,8 @@ def report_provenance(run: RunData, out_dir: Path) -> dict[str, Any]:
         "report generated (UTC)": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S"),
         "report code git commit": git_commit(),
         "run directory": str(run.run_dir),
+        "task protocol (records)": protocol_summary(episodes),
+        "task protocol (report code)": PROTOCOL,
         "output directory": str(out_dir),
         "episode record files": [str(p) for p in run.episode_files],
         "ignored files": run.ignored_files,

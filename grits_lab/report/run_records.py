@@ -30,7 +30,7 @@ import yaml
 
 from grits_lab.config import parse_yaml
 from grits_lab.errors import InputError, StorageError
-from grits_lab.records import OUTCOME_COLUMNS
+from grits_lab.records import OUTCOME_COLUMNS, with_protocol
 from grits_lab.report.vocabulary import canonical_name, method_display
 
 REQUIRED_COLUMNS = ("method", "food", "level", *OUTCOME_COLUMNS)
@@ -40,7 +40,7 @@ TRIALS_FILES = ("trials.parquet", "trials.csv")
 NOT_RECORD_FILES = {"trials.parquet", "index.parquet"}
 MAX_CONFIG_CHARS = 20_000
 # Columns that identify one episode; a row seen twice with the same identity is a duplicate.
-IDENTITY_COLUMNS = ("run_id", "method", "food", "level", "trial", "seed", "rho", "s", "checkpoint_predictor")
+IDENTITY_COLUMNS = ("run_id", "protocol", "method", "food", "level", "trial", "seed", "rho", "s", "checkpoint_predictor")
 
 
 @dataclass
@@ -121,8 +121,12 @@ def normalize_records(frame: pd.DataFrame) -> pd.DataFrame:
     A method evaluated at more than one guidance setting (rho, s), or guided by more than one
     predictor checkpoint (`checkpoint_predictor`, its digest), is split into variants, one per
     combination, so that rows from different settings or predictors are never pooled into one rate.
+    Records of more than one task protocol (`protocol`, docs/protocol.md) label every variant with
+    its protocol, so no table pools two protocols or shows them side by side unlabelled.
     """
     frame = frame.copy()
+    if "protocol" not in frame.columns:
+        frame = with_protocol(frame)
     missing = [c for c in REQUIRED_COLUMNS if c not in frame.columns]
     if missing:
         raise InputError(f"episode records lack required columns: {', '.join(missing)}")
@@ -170,21 +174,25 @@ def _parse_bool(text: str, column: str) -> float:
 
 def _variants(frame: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
     """Per row: the variant key and display name; a method recorded at more than one guidance setting
-    (rho, s) or with more than one predictor checkpoint (its digest) gets one variant per combination."""
+    (rho, s) or with more than one predictor checkpoint (its digest) gets one variant per combination,
+    and when the records hold more than one task protocol every variant names its protocol."""
     variant = frame["method"].copy()
     name = frame["method"].map(method_display)
     predictor = frame["checkpoint_predictor"].astype(str) if "checkpoint_predictor" in frame.columns else pd.Series("", index=frame.index)
+    by_protocol = frame["protocol"].nunique() > 1
     for method, rows in frame.groupby("method", sort=False):
         settings = rows[["rho", "s"]].drop_duplicates()
         predictors = predictor[rows.index]
         by_setting, by_predictor = len(settings) > 1, predictors.nunique() > 1
-        if not (by_setting or by_predictor):
+        if not (by_setting or by_predictor or by_protocol):
             continue
         digits = _label_digits(settings)
         for index, row in rows.iterrows():
             parts = [_setting_label(row["rho"], row["s"], digits)] if by_setting else []
             if by_predictor:
                 parts.append(f"predictor {predictors[index][:8]}")
+            if by_protocol:
+                parts.append(str(row["protocol"]))
             label = ", ".join(parts)
             variant.at[index] = f"{method}[{label}]"
             name.at[index] = f"{method_display(method)} ({label})"
@@ -249,7 +257,7 @@ def _read_records(files: list[Path], data: RunData) -> list[pd.DataFrame]:
             data.ignored_files.append(f"{path.name} (not episode records: lacks {', '.join(missing)})")
             continue
         data.episode_files.append(path)
-        frames.append(_with_guiding_predictor(frame))
+        frames.append(_with_guiding_predictor(with_protocol(frame)))
     return frames
 
 

@@ -275,7 +275,11 @@ def claims_table(episodes: pd.DataFrame | None) -> ReportTable:
                 math.nan, (g["scoop_failure"].rate - d["scoop_failure"].rate) if not pair_missing else math.nan,
                 "needs both methods' records" if pair_missing else ("higher" if higher else "not higher"))
     ablation = {m: outcome_rates(_select(episodes, method=m)) for m in ABLATION_METHODS}
-    if all(not r["task_success"].missing for r in ablation.values()):
+    several = [method_display(m) for m in ABLATION_METHODS if len(variants_of(episodes, m)) > 1]
+    if several:  # variants (settings, predictors, protocols) are compared in Fig. 8, never pooled here
+        add("Ablation: composite cloud + DP3 beats raw cloud and PointNet++ on success and spillage", "yes",
+            MISSING, 1.0, math.nan, f"several variants of {', '.join(several)}: see Fig. 8")
+    elif all(not r["task_success"].missing for r in ablation.values()):
         g = ablation["grits"]
         others = [ablation[m] for m in ABLATION_METHODS if m != "grits"]
         best = all(g["task_success"].rate > o["task_success"].rate and g["spillage"].rate < o["spillage"].rate for o in others)
@@ -315,13 +319,20 @@ def _select(episodes: pd.DataFrame | None, **equal: object) -> pd.DataFrame:
 
 
 def setting_table(episodes: pd.DataFrame) -> ReportTable:
-    """Per method and guidance setting (rho, s): rates with Wilson 95% intervals, from sweep trial records."""
+    """Per method and guidance setting (rho, s): rates with Wilson 95% intervals, from sweep trial records.
+
+    Records of more than one task protocol get a row per protocol (a Protocol column), never pooled."""
     display_rows, data_rows = [], []
-    for (method, rho, s), rows in episodes.groupby(["method", "rho", "s"], dropna=False, sort=True):
+    by_protocol = "protocol" in episodes.columns and episodes["protocol"].nunique() > 1
+    keys = ["method", "rho", "s", *(["protocol"] if by_protocol else [])]
+    for key, rows in episodes.groupby(keys, dropna=False, sort=True):
+        method, rho, s = key[:3]
         rates = outcome_rates(rows)
         shown = {"Method": method_display(method), "rho": MISSING if pd.isna(rho) else f"{rho:.4g}", "s": str(s),
+                 **({"Protocol": str(key[3])} if by_protocol else {}),
                  "Episodes": str(len(rows)), "Errors": str(int(rows["is_error"].sum()))}
-        data = {"method": method, "rho": rho, "s": s, "episodes": len(rows), "errors": int(rows["is_error"].sum())}
+        data = {"method": method, "rho": rho, "s": s, **({"protocol": key[3]} if by_protocol else {}),
+                "episodes": len(rows), "errors": int(rows["is_error"].sum())}
         for outcome, r in rates.items():
             shown[OUTCOME_NAMES[outcome]] = format_rate(r)
             data.update({f"{outcome}_k": r.k, f"{outcome}_rate": r.rate, f"{outcome}_ci_low": r.low, f"{outcome}_ci_high": r.high})

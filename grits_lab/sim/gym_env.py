@@ -1,7 +1,7 @@
-"""`ScoopGymEnv`: the scooping world as a registered `gymnasium.Env` ("grits_lab/Scoop-v0").
+"""`ScoopGymEnv`: the scooping world as a registered `gymnasium.Env` ("grits_lab/Scoop-v4").
 
     import gymnasium, grits_lab.sim
-    env = gymnasium.make("grits_lab/Scoop-v0", food="prune", level="low", render_mode="rgb_array")
+    env = gymnasium.make("grits_lab/Scoop-v4", food="prune", level="low", render_mode="rgb_array")
     obs, info = env.reset(seed=0)
 
 It is a `ScoopEnv` (every query of the simulator stays available through `env.unwrapped`) with
@@ -45,10 +45,11 @@ import numpy as np
 from gymnasium import spaces
 
 from grits_lab.geometry import axis_angle_matrix
+from grits_lab.versions import PROTOCOL_VERSION
 from grits_lab.sim.sim_config import SimConfig
 from grits_lab.sim.env import DEFAULT_FOOD, ScoopEnv, matrix_to_pose9, pose9_to_matrix
 
-ENV_ID = "grits_lab/Scoop-v0"
+ENV_ID = f"grits_lab/Scoop-v{PROTOCOL_VERSION}"  # the task protocol's version (grits_lab/versions.py)
 N_JOINTS = 7
 ACTION_MODES = ("relative", "absolute")
 

@@ -12,6 +12,7 @@ import numpy as np
 from grits_lab.errors import InputError
 from grits_lab.geometry import pose7_to_pose9
 from grits_lab.seeding import derive_seed, make_rng
+from grits_lab.versions import PROTOCOL
 
 
 @dataclass
@@ -32,6 +33,7 @@ class EpisodeRecord:
     first_spill_step: int  # action step at which spillage first happened, -1 if none
     ik_failures: int  # action steps whose target pose the arm could not reach
     n_steps: int
+    protocol: str = PROTOCOL  # the task protocol the episode ran under (grits_lab/versions.py, docs/protocol.md)
     transferred: int = -1  # particles in the target bowl (-1: no transfer stage played)
     settle_time_s: float = 0.0
     wall_time_s: float = 0.0

@@ -21,6 +21,7 @@ from grits_lab.errors import ConfigError, StorageError
 from grits_lab.spillage.predictor_config import PredictorConfig
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
 from grits_lab.training.checkpoints import load_checkpoint, save_checkpoint
+from grits_lab.versions import PROTOCOL
 
 CHECKPOINT_FORMAT = "grits-spillage-predictor/1"
 
@@ -57,6 +58,7 @@ def save_predictor(path: str | Path, *, config: PredictorConfig, model: Spillage
     """Write the checkpoint atomically (a crash mid-write leaves the previous one intact)."""
     payload = {
         "format": CHECKPOINT_FORMAT,
+        "protocol": PROTOCOL,  # the task protocol of the code that trained it (docs/protocol.md)
         "config": config_to_dict(config),
         "model": model.state_dict(),
         "action_normalizer": action_normalizer.state_dict(),

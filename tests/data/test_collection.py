@@ -209,3 +209,20 @@ def test_a_base_trajectory_that_is_not_a_pose_array_is_refused_before_the_datase
     with pytest.raises(InputError, match="objects.npy"):
         run_collection(config, progress=False)
     assert not (tmp_path / "spill").exists()
+
+
+def test_a_dataset_of_another_protocol_is_refused_and_a_new_one_names_its_own(tmp_path):
+    import yaml
+
+    from grits_lab.data.info import dataset_summary
+    from grits_lab.errors import StorageError
+    from grits_lab.versions import PROTOCOL
+
+    config = _short_spillage_config(tmp_path, episodes=1)
+    run_collection(config, progress=False)
+    manifest_path = tmp_path / "spill" / "dataset.yaml"
+    manifest = yaml.safe_load(manifest_path.read_text())
+    assert manifest["protocol"] == PROTOCOL == dataset_summary(tmp_path / "spill")["protocol"]
+    manifest_path.write_text(yaml.safe_dump({**manifest, "protocol": "scoop-v3"}, sort_keys=False))
+    with pytest.raises(StorageError, match=rf"holds a dataset of protocol scoop-v3, but this code runs {PROTOCOL}"):
+        run_collection(config, progress=False)

@@ -74,3 +74,26 @@ def test_an_override_that_gives_guidance_twice_is_refused_naming_the_key_and_bot
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"grits-lab: error: {override}: key `guidance` is given twice (lines 1 and 2); give it once"]
     assert not (tmp_path / "run").exists()
+
+
+def test_records_of_another_protocol_are_not_resumed_and_checkpoints_name_theirs(models, tmp_path):
+    import pandas as pd
+
+    from grits_lab.errors import InputError
+    from grits_lab.training.checkpoints import load_checkpoint
+    from grits_lab.versions import PROTOCOL
+
+    assert load_checkpoint(models["policy"])["protocol"] == PROTOCOL
+    assert read_checkpoint(models["predictor"])["protocol"] == PROTOCOL
+    run = tmp_path / "run"
+    run.mkdir()
+    old = {"run_id": "test", "method": "expert", "food": "chocolate_balls", "level": "low", "trial": 0, "seed": 1,
+           "task_success": True, "spillage": False, "scoop_failure": False, "error": "", "rho": float("nan"), "s": -1}
+    pd.DataFrame([{**old, "protocol": "scoop-v3"}]).to_parquet(run / "episodes.parquet", index=False)
+    config = eval_config(models, run, methods=["expert"])
+    with pytest.raises(InputError, match=rf"holds episodes of protocol scoop-v3, but this code runs {PROTOCOL} .*--restart"):
+        evaluate(config, progress=False)
+    # a file written before the column existed, without the stage x cause columns of scoop-v4, is older too
+    pd.DataFrame([old]).to_parquet(run / "episodes.parquet", index=False)
+    with pytest.raises(InputError, match=r"protocol unversioned \(before scoop-v4\)"):
+        evaluate(config, progress=False)

@@ -15,10 +15,11 @@ import pandas as pd
 from grits_lab.records import RECORD_COLUMNS
 from grits_lab.report.vocabulary import UNSEEN_FOODS
 from grits_lab.seeding import derive_seed
+from grits_lab.versions import PROTOCOL
 
 
 def episode(method: str, food: str, level: str, trial: int, outcome: str, *, spilled_before_scoop: bool | None = None,
-            error: str = "", rho: float = math.nan, s: int = -1, run_id: str = "synthetic") -> dict:
+            error: str = "", rho: float = math.nan, s: int = -1, run_id: str = "synthetic", protocol: str = PROTOCOL) -> dict:
     """One record; `outcome` is one of success, spill, scoop_fail, spill_and_scoop_fail, transfer_fail."""
     success = outcome == "success"
     spill = outcome in ("spill", "spill_and_scoop_fail")
@@ -26,7 +27,7 @@ def episode(method: str, food: str, level: str, trial: int, outcome: str, *, spi
     if method in ("grits", "grits_raw", "grits_pointnet2", "dp_post") and math.isnan(rho):
         rho, s = 2.5, 30
     row = {
-        "run_id": run_id, "method": method, "food": food, "split": "unseen", "level": level, "trial": trial,
+        "run_id": run_id, "protocol": protocol, "method": method, "food": food, "split": "unseen", "level": level, "trial": trial,
         "seed": derive_seed(0, food, level, trial),
         "task_success": success and not error, "spillage": spill, "scoop_failure": scoop_fail,
         "scoop_success": not scoop_fail, "spilled_before_scoop": spill if spilled_before_scoop is None else spilled_before_scoop,

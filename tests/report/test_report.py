@@ -299,6 +299,29 @@ def test_runs_guided_by_different_predictors_report_one_variant_per_predictor(tm
     assert main(["report", str(old), str(new), "--output-dir", str(tmp_path / "out2")]) == 2
 
 
+def test_records_of_two_protocols_are_labelled_with_their_protocol_and_never_pooled(tmp_path):
+    before, now, out = tmp_path / "before", tmp_path / "now", tmp_path / "out"
+    for folder in (before, now):
+        folder.mkdir()
+    # The same episodes (the same run_id and seeds) under two protocols: a before/after comparison.
+    pd.DataFrame([episode("dp", "sago", "low", t, "success" if t < 1 else "spill", run_id="evaluate", protocol="scoop-v3")
+                  for t in range(4)]).to_parquet(before / "episodes.parquet", index=False)
+    pd.DataFrame([episode("dp", "sago", "low", t, "success", run_id="evaluate") for t in range(4)]
+                 + [episode("grits", "sago", "low", t, "success", run_id="evaluate") for t in range(4)]).to_parquet(now / "episodes.parquet", index=False)
+    assert main(["report", str(before), str(now), "--output-dir", str(out)]) == 0
+    fig5 = pd.read_csv(out / "csv" / "fig5_overall.csv").set_index("variant")
+    assert fig5.loc["dp[scoop-v3]", "task_success_k"] == 1 and fig5.loc["dp[scoop-v3]", "episodes"] == 4
+    assert fig5.loc["dp[scoop-v4]", "task_success_k"] == 4 and fig5.loc["dp[scoop-v4]", "episodes"] == 4
+    assert fig5.loc["grits[scoop-v4]", "method_name"] == "GRITS (scoop-v4)"  # every method names its protocol
+    assert "scoop-v3 (4 episodes), scoop-v4 (8 episodes)" in (out / "report.md").read_text()
+    # One protocol: no label; records written before the column existed are read as docs/protocol.md says.
+    one = normalize_records(pd.DataFrame([episode("dp", "sago", "low", 0, "success")]))
+    assert list(one["variant"]) == ["dp"]
+    unrecorded = pd.DataFrame([episode("dp", "sago", "low", 0, "success")]).drop(columns="protocol")
+    assert list(normalize_records(unrecorded)["protocol"]) == ["unversioned (before scoop-v4)"]
+    assert list(normalize_records(unrecorded.assign(spilled_scoop_over_rim=0))["protocol"]) == ["scoop-v4"]
+
+
 def test_runs_that_cannot_be_reported_together_are_refused_in_one_line(tmp_path, capsys):
     first, second, sweep = tmp_path / "first", tmp_path / "second", tmp_path / "sweep"
     for folder in (first, second, sweep):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import grits_lab.sim  # noqa: F401  (registers grits_lab/Scoop-v0)
+import grits_lab.sim  # noqa: F401  (registers grits_lab/Scoop-v4)
 from grits_lab.errors import InputError
 from grits_lab.sim import ENV_ID, ScoopEnv, ScoopGymEnv, nominal_expert_trajectory
 from grits_lab.sim.foods import level_count, load_foods
@@ -133,6 +133,16 @@ def test_rgb_array_rendering_shows_the_scene_and_no_render_mode_renders_nothing(
         assert quiet.unwrapped.render() is None
     finally:
         quiet.close()
+
+
+def test_the_env_id_is_versioned_with_the_task_protocol_and_an_older_id_names_it():
+    from grits_lab.versions import PROTOCOL_VERSION
+
+    assert ENV_ID == f"grits_lab/Scoop-v{PROTOCOL_VERSION}"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        with pytest.raises(gymnasium.error.DeprecatedEnv, match=f"use `{ENV_ID}`"):
+            gymnasium.make("grits_lab/Scoop-v0")
 
 
 def test_an_unknown_food_fails_when_the_env_is_made():
