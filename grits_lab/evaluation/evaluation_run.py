@@ -276,7 +276,10 @@ def _evaluate_in(out: Path, config: EvaluationConfig, specs: list[EpisodeSpec], 
     _refuse_other_protocol(records_path, done)
     _refuse_other_checkpoints(records_path, done, paths, digests)
     recorded_methods = list(dict.fromkeys(str(r["method"]) for r in done))
-    described = replace(config, methods=list(dict.fromkeys([*recorded_methods, *config.methods])))
+    from grits_lab.evaluation.custom_methods import registered_methods
+
+    known = {*METHODS, *registered_methods(config.custom_methods)}  # a lab's method no longer registered stays in provenance.json
+    described = replace(config, methods=list(dict.fromkeys([*(m for m in recorded_methods if m in known), *config.methods])))
     write_text_atomic(out / "config.yaml", yaml.safe_dump(config_to_dict(described), sort_keys=False))
     write_json_atomic(out / "provenance.json", provenance(config, paths, digests, len(specs), earlier=_earlier_methods(out, recorded_methods)))
     if restart and records_path.exists():

@@ -134,6 +134,9 @@ def load_run_config(run_dir: str | Path, record: dict[str, Any]) -> Any:
     if not path.is_file():
         raise InputError(f"no config.yaml in {run_dir}: replay needs the resolved config `grits-lab evaluate` writes there")
     data = dict(load_yaml(path))
+    # Only the replayed method: a run directory may come from someone else, and loading the config
+    # imports the controller file of every custom method it lists.
+    data["methods"] = [record["method"]]
     sampler = METHODS[record["method"]].sampler if record["method"] in METHODS else None
     rho, s = record.get("rho"), record.get("s")
     if sampler == "guided" and not _is_nan(rho):

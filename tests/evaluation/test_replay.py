@@ -155,3 +155,20 @@ def test_a_replay_draws_a_guided_plan_over_its_cloud(run, tmp_path, capsys):
     code = main(["replay", str(run_dir), "--method", "dp", "--food", picked["food"], "--level", picked["level"],
                  "--trial", str(picked["trial"]), "--plan-figure", str(tmp_path / "dp.png")])
     assert code == 2 and "no guidance to draw" in capsys.readouterr().err and not (tmp_path / "dp.png").exists()
+
+
+def test_replaying_a_built_in_method_never_imports_the_lab_files_a_run_config_names(run, tmp_path):
+    import yaml
+
+    run_dir, records = run
+    marker = tmp_path / "ran"
+    lab = tmp_path / "lab.py"
+    lab.write_text(f"import pathlib\npathlib.Path({str(marker)!r}).touch()\nclass C:\n    cloud_steps = 1\n    def reset(self, scene): pass\n    def plan(self, history, scene): return None\n")
+    copied = run_copy(run_dir, tmp_path / "copied", records)
+    config = yaml.safe_load((copied / "config.yaml").read_text())
+    config["methods"] = [*config["methods"], "lab"]
+    config["custom_methods"] = {"lab": {"controller": f"{lab}:C"}}
+    (copied / "config.yaml").write_text(yaml.safe_dump(config))
+    result = replay_episode(copied, **episode(records, "dp"))
+    assert result.matches, result.describe()
+    assert not marker.exists()

@@ -83,3 +83,16 @@ def test_a_changed_checkpoint_is_refused_not_resumed_and_restart_starts_over(mod
     assert json.loads((run_dir / "provenance.json").read_text())["methods"]["dp"]["checkpoints"]["policy"]["path"] == models["policy"]
     records = evaluate(changed, progress=False, restart=True)
     assert list(records["checkpoint_policy"]) != list(before["checkpoint_policy"])
+
+
+def test_a_lab_method_recorded_earlier_stays_in_provenance_when_a_later_config_does_not_register_it(models, tmp_path):
+    from grits_lab.config import config_from_dict
+    from grits_lab.evaluation.evaluation_config import EvaluationConfig
+    from tests.evaluation.test_custom_methods import tiny_config
+
+    run_dir = tmp_path / "run"
+    evaluate(config_from_dict(EvaluationConfig, tiny_config(tmp_path)), progress=False)
+    records = evaluate(eval_config(models, run_dir, methods=["rule_based"]), progress=False)
+    assert sorted(records["method"]) == ["rule_based", "torch_mlp"]
+    assert yaml.safe_load((run_dir / "config.yaml").read_text())["methods"] == ["rule_based"]
+    assert set(json.loads((run_dir / "provenance.json").read_text())["methods"]) == {"rule_based", "torch_mlp"}
