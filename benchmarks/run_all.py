@@ -43,6 +43,7 @@ def benchmark_commands(full: bool) -> dict[str, list[str]]:
         "predictor": [py, str(HERE / "bench_predictor.py"), "--repeats", "20" if full else "5"],
         "evaluation": [py, str(HERE / "bench_evaluation.py"), "--presets", *(["cpu", "paper"] if full else ["cpu"]),
                        "--repeats", "10" if full else "4", "--episodes", "4" if full else "2"],
+        "sweep_pool": [py, str(HERE / "bench_sweep_pool.py"), "--trials", "6" if full else "3"],
         # needs a demonstration dataset: grits-lab collect experiments/demos_quick.yaml
         "data_parallel": [py, str(HERE / "bench_data_parallel.py"), "--steps", "300" if full else "100"],
     }
@@ -120,6 +121,10 @@ def headlines(name: str, result: dict) -> list[tuple[str, object]]:
                 for layout, run in result.get("runs", {}).items()]
     if name == "predictor":
         return [(key, value) for key, value in result.items() if key.startswith("dp3_batch1")]
+    if name == "sweep_pool":
+        return [("sweep: overhead per trial, a pool per trial (s)", result.get("overhead_per_trial_before_s")),
+                ("sweep: overhead per trial, one pool per sweep (s)", result.get("overhead_per_trial_now_s")),
+                ("sweep: trial wall time, a pool per trial / one pool per sweep", result.get("ratio_trial_wall_before_over_now"))]
     if name == "evaluation":
         rows = []
         for key, value in result.items():
@@ -165,8 +170,8 @@ def main() -> int:
     parser.add_argument("--only", nargs="+", help="run only these benchmarks")
     parser.add_argument("--with-pipeline", action="store_true", help="also time the quickstart pipeline end to end")
     parser.add_argument("--timeout", type=float, default=1800, help="seconds per benchmark")
-    add_flag(parser, "--output-dir", deprecated=("--out",), default=str(ROOT / "results" / "benchmarks"),
-             help="where summary.json and summary.md go (default: results/benchmarks)")
+    parser.add_argument("--output-dir", default=str(ROOT / "results" / "benchmarks"),
+                        help="where summary.json and summary.md go (default: results/benchmarks)")
     args = parser.parse_args()
     out = Path(args.output_dir)
     out.mkdir(parents=True, exist_ok=True)

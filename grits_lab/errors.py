@@ -1,7 +1,4 @@
-"""Exceptions that the command line turns into one clear line and a non-zero exit, and the one
-line that an old spelling (of a flag or a config key) prints when it is still accepted."""
-
-import sys
+"""Exceptions that the command line turns into one clear line and a non-zero exit."""
 
 
 class GritsError(Exception):
@@ -18,8 +15,3 @@ class InputError(GritsError):
 
 class StorageError(GritsError):
     """An output location cannot be written, or a stored file is missing or corrupted."""
-
-
-def warn_deprecated(old: str, new: str) -> None:
-    """One line on stderr: `old` still works but is deprecated in favour of `new`."""
-    print(f"grits-lab: {old} is deprecated; use {new}", file=sys.stderr)

@@ -87,7 +87,7 @@ def test_merge_keys_may_be_overridden_and_equal_text_of_other_types_are_two_keys
 
 @dataclasses.dataclass
 class RenamedConfig:
-    deprecated_keys: ClassVar[dict[str, str]] = {"out": "output_dir"}
+    retired_keys: ClassVar[dict[str, str]] = {"out": "output_dir"}
 
     output_dir: str = "here"
     inner: InnerConfig = dataclasses.field(default_factory=InnerConfig)
@@ -98,20 +98,15 @@ class HolderConfig:
     part: RenamedConfig = dataclasses.field(default_factory=RenamedConfig)
 
 
-def test_a_deprecated_key_loads_under_its_new_name_with_one_line(capsys):
-    assert config_from_dict(HolderConfig, {"part": {"out": "there"}}) == HolderConfig(RenamedConfig("there"))
-    assert capsys.readouterr().err == "grits-lab: config key `part.out` is deprecated; use `part.output_dir`\n"
+def test_a_retired_key_fails_in_one_line_naming_its_new_name(capsys):
+    with pytest.raises(ConfigError, match=r"^`part.out` is retired; use `part.output_dir` \(docs/migration.md\)$"):
+        config_from_dict(HolderConfig, {"part": {"out": "there"}})
     assert config_from_dict(RenamedConfig, {"output_dir": "there"}).output_dir == "there"
-    assert capsys.readouterr().err == ""
-
-
-def test_a_deprecated_key_beside_its_new_name_or_an_unknown_key_is_an_error():
-    with pytest.raises(ConfigError, match=r"`part.out` is the deprecated name of `part.output_dir`; give only `part.output_dir`"):
-        config_from_dict(HolderConfig, {"part": {"out": "a", "output_dir": "b"}})
     with pytest.raises(ConfigError, match=r"unknown key `part.output`"):
         config_from_dict(HolderConfig, {"part": {"output": "a"}})
-    with pytest.raises(ConfigError, match=r"unknown key `part.inner.out`"):  # renames are per dataclass
+    with pytest.raises(ConfigError, match=r"unknown key `part.inner.out`"):  # retired keys are per dataclass
         config_from_dict(HolderConfig, {"part": {"inner": {"out": "a"}}})
+    assert capsys.readouterr().err == ""
 
 
 @pytest.mark.parametrize("kind, old, new, value", [
@@ -119,24 +114,23 @@ def test_a_deprecated_key_beside_its_new_name_or_an_unknown_key_is_an_error():
     ("spillage", "output", "output_dir", "d"),
     ("spillage", "trials", "episodes", 8),
 ])
-def test_collection_configs_read_their_old_keys(tmp_path, capsys, kind, old, new, value):
+def test_collection_configs_refuse_their_retired_keys(tmp_path, kind, old, new, value):
     from grits_lab.collection import load_collect_config
 
     path = tmp_path / "c.yaml"
     path.write_text(f"kind: {kind}\n{old}: {value}\n")
-    assert getattr(load_collect_config(path), new) == value
-    assert capsys.readouterr().err == f"grits-lab: config key `{old}` is deprecated; use `{new}`\n"
+    with pytest.raises(ConfigError, match=rf"c.yaml: `{old}` is retired; use `{new}`"):
+        load_collect_config(path)
 
 
-def test_a_sweep_reads_results_dir_as_output_dir(tmp_path, capsys):
+def test_a_sweep_refuses_results_dir_naming_output_dir(tmp_path):
     from grits_lab.tune.study_config import load_study_config
 
     path = tmp_path / "s.yaml"
     path.write_text("study_name: s\nn_trials: 1\nevaluator: synthetic\nresults_dir: r\n"
                     "validation: {foods: [soybeans], levels: [low]}\n")
-    config = load_study_config(path)
-    assert config.output_dir == "r" and str(config.study_dir) == "r/s"
-    assert capsys.readouterr().err.count("\n") == 1
+    with pytest.raises(ConfigError, match=r"`results_dir` is retired; use `output_dir`"):
+        load_study_config(path)
 
 
 def test_fingerprint_changes_with_values_only():

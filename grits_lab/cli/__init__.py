@@ -26,23 +26,29 @@ from grits_lab.cli import (
 )
 from grits_lab.errors import GritsError
 
-# In the order `grits-lab --help` lists them.
+# In the order of the workflow, as `grits-lab --help` and the README list them: the world, data,
+# training, evaluation, tuning, the report, and the pipeline that runs them all.
 COMMAND_GROUPS = (
-    pipeline_commands,
-    data_commands,
     sim_commands,
+    data_commands,
+    train_commands,
+    compare_commands,
+    evaluate_commands,
     sweep_commands,
     report_commands,
-    evaluate_commands,
-    compare_commands,
-    train_commands,
+    pipeline_commands,
 )
+
+EPILOG = """first run: grits-lab pipeline experiments/quickstart.yaml (every stage at a small size, resumable)
+flags that were renamed: docs/migration.md"""
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="grits-lab",
         description="Spillage-aware guided diffusion for robot food scooping, in PyBullet.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"grits-lab {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -53,7 +59,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except GritsError as exc:  # a retired flag (grits_lab/cli/flags.py)
+        print(f"grits-lab: error: {exc}", file=sys.stderr)
+        return 2
     handler = getattr(args, "handler", None)
     if handler is None:
         parser.print_help(sys.stderr)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from grits_lab.cli.flags import DeprecatedFlag
+from grits_lab.cli.flags import retire
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -24,10 +24,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--output-dir", metavar="DIR",
                         help="where the runs are and the comparison is written, to OUTPUT_DIR/comparison_<dataset> "
                              "(overrides output_dir in every config; default: the first config's)")
-    parser.add_argument("--out", metavar="DIR", action=DeprecatedFlag,
-                        use="--output-dir (the comparison goes to OUTPUT_DIR/comparison_<dataset>)")
     parser.add_argument("--bootstrap", type=int, default=2000, metavar="N", help="bootstrap resamples (default 2000)")
-    parser.add_argument("--seed", type=int, default=0, help="bootstrap seed")
+    parser.add_argument("--label", choices=["chunk", "horizon"],
+                        help="score against this label of every chunk: chunk (the spilled count rose during the chunk) or "
+                             "horizon (food spilled before the load was delivered); default: the one the predictors trained on")
+    parser.add_argument("--bootstrap-seed", type=int, default=0, metavar="N", help="seed of the bootstrap resampling (default 0)")
+    retire(parser, "--out", "--output-dir (the comparison goes to OUTPUT_DIR/comparison_<dataset>)")
+    retire(parser, "--seed", "--bootstrap-seed")
     parser.set_defaults(handler=_run)
 
 
@@ -54,9 +57,16 @@ def _run(args: argparse.Namespace) -> int:
             raise InputError(f"{path}: no {args.checkpoint} checkpoint at {checkpoint}; train it first with `grits-lab train predictor {path}`")
         checkpoints[config.name] = checkpoint
     torch.set_num_threads(configs[0].train.num_threads)
-    predictions = predict_all(checkpoints, args.eval)
-    comparison = compare_predictions(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.seed, n_bins=configs[0].train.ece_bins)
-    out = Path(args.out) if args.out else Path(configs[0].output_dir) / f"comparison_{Path(args.eval).name}"
+    trained_on = {config.name: config.data.label for config in configs}
+    if args.label is None and len(set(trained_on.values())) > 1:
+        raise InputError(f"the predictors trained on different labels ({', '.join(f'{n}: {lb}' for n, lb in trained_on.items())}); "
+                         "choose the one to score against with --label chunk or --label horizon")
+    label = args.label or configs[0].data.label
+    predictions = predict_all(checkpoints, args.eval, label=label)
+    comparison = compare_predictions(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed, n_bins=configs[0].train.ece_bins, label=label)
+    out = Path(configs[0].output_dir) / f"comparison_{Path(args.eval).name}"
+    if label != "chunk":  # scored against another label: its own table, beside the chunk label's
+        out = out.with_name(f"{out.name}_{label}")
     files = write_comparison(comparison, str(args.eval), out)
     print(comparison_markdown(comparison, str(args.eval)))
     print(f"written: {', '.join(str(f) for f in files)}")

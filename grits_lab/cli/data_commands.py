@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from grits_lab.cli.flags import add_flag
+from grits_lab.cli.flags import retire
 from grits_lab.io import to_json
 
 
@@ -16,12 +16,15 @@ def register(subparsers: Any) -> None:
         description="Generate a dataset in parallel. Re-running the same command resumes an interrupted job.",
     )
     collect.add_argument("config", help="collection config, e.g. experiments/demos_quick.yaml")
-    add_flag(collect, "--output-dir", deprecated=("--output",), metavar="DIR", help="dataset directory (overrides `output_dir` in the config)")
-    collect.add_argument("--seed", type=int, help="root seed (overrides `seed:`; e.g. a held-out copy of a dataset)")
+    collect.add_argument("--output-dir", metavar="DIR", help="dataset directory (overrides `output_dir` in the config)")
+    collect.add_argument("--root-seed", type=int, metavar="N",
+                         help="root seed every episode's seed is derived from (overrides `seed:`; e.g. a held-out copy of a dataset)")
     collect.add_argument("--workers", type=int, help="number of parallel workers (overrides executor.workers)")
     collect.add_argument("--address", help="Ray cluster address (overrides executor.address and RAY_ADDRESS)")
     collect.add_argument("--serial", action="store_true", help="run in this process, without Ray")
     collect.add_argument("--no-progress", action="store_true", help="no progress bar (logs, CI)")
+    retire(collect, "--output", "--output-dir")
+    retire(collect, "--seed", "--root-seed")
     collect.set_defaults(handler=_collect)
 
     dataset = subparsers.add_parser("dataset", help="inspect datasets")
@@ -39,8 +42,8 @@ def _collect(args: argparse.Namespace) -> int:
     config = load_collect_config(args.config)
     if args.output_dir:
         config.output_dir = args.output_dir
-    if args.seed is not None:
-        config.seed = args.seed
+    if args.root_seed is not None:
+        config.seed = args.root_seed
     if args.workers is not None:
         if args.workers < 1:
             from grits_lab.errors import InputError

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from grits_lab.cli.flags import add_flag
+from grits_lab.cli.flags import retire
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -24,9 +24,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="YAML merged over the config (any of its keys), e.g. a sweep's best.yaml with `guidance: {rho: ..., s: ...}`")
     parser.add_argument("--methods", nargs="+", default=None, help="evaluate only these methods (default: the config's)")
     parser.add_argument("--output-dir", metavar="DIR", default=None, help="run directory (overrides the config's output_dir)")
+    parser.add_argument("--address", help="Ray cluster address (overrides executor.address and RAY_ADDRESS)")
     parser.add_argument("--serial", action="store_true", help="run in this process instead of on Ray")
-    add_flag(parser, "--restart", deprecated=("--fresh",), action="store_true", help="discard the run directory's records and start over")
+    parser.add_argument("--restart", action="store_true", help="discard the run directory's records and start over")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    retire(parser, "--fresh", "--restart")
     parser.set_defaults(handler=_run)
 
     replay = subparsers.add_parser(
@@ -69,8 +71,10 @@ def _run(args: argparse.Namespace) -> int:
         overrides["methods"] = list(args.methods)
     if args.output_dir:
         overrides["output_dir"] = args.output_dir
+    if args.address:
+        overrides["executor"] = {**overrides.get("executor", {}), "address": args.address}
     if args.serial:
-        overrides["executor"] = {"backend": "serial"}
+        overrides["executor"] = {**overrides.get("executor", {}), "backend": "serial"}
     config = load_evaluation_config(args.config, overrides)
     records = evaluate(config, progress=not args.no_progress, restart=args.restart)
     print(summary_table(records))

@@ -17,6 +17,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("config", help="pipeline config, e.g. experiments/quickstart.yaml")
     parser.add_argument("--only", nargs="+", metavar="STAGE", help="run only these stages")
     parser.add_argument("--force", nargs="+", metavar="STAGE", default=[], help="run these stages even if up to date; each resumes its outputs (nothing is discarded)")
+    parser.add_argument("--address", help="Ray cluster address for collection and evaluation (overrides `address` in the config and RAY_ADDRESS)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     parser.set_defaults(handler=_run)
 
@@ -27,6 +28,8 @@ def _run(args: argparse.Namespace) -> int:
     from grits_lab.pipeline.pipeline_run import run_pipeline
 
     config = load_pipeline_config(args.config)
+    if args.address:
+        config.address = args.address
     for name in (args.only or []) + list(args.force):
         if name not in config.stages:
             raise InputError(f"unknown stage `{name}`; this pipeline has: {', '.join(config.ordered_stages())}")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from grits_lab.cli.flags import add_flag
+from grits_lab.cli.flags import retire
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -21,7 +21,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("also", metavar="OTHER_RUN", nargs="*",
                         help="more evaluation run directories whose records are reported beside RUN_DIR's, e.g. GRITS at a "
                              "sweep's tuned (rho, s) beside the paper's; a method run at several (rho, s) gets one row per setting")
-    add_flag(parser, "--output-dir", deprecated=("--out",), metavar="DIR", default=None, help="output directory (default: RUN_DIR/report)")
+    parser.add_argument("--output-dir", metavar="DIR", default=None, help="output directory (default: RUN_DIR/report)")
+    retire(parser, "--out", "--output-dir")
     parser.add_argument("--videos", metavar="N", type=int, default=0,
                         help="replay up to N episodes per food under Diffusion Policy and GRITS (same seed) and show the videos "
                              "side by side (needs the run's checkpoints; RUN_DIR must be a `grits-lab evaluate` run directory)")

@@ -7,16 +7,23 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from grits_lab.cli.flags import add_flag
+from grits_lab.cli.flags import retire
 from grits_lab.errors import InputError
 from grits_lab.io import to_json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    _register_foods(subparsers)  # the workflow's order: the foods, the scene, then an episode in it
+    s = subparsers.add_parser("scene", help="print the scene geometry for an episode seed")
+    s.add_argument("--episode-seed", type=int, required=True, metavar="N", help="episode seed (world, target bowl)")
+    s.add_argument("--json", action="store_true", help="print exactly one JSON object")
+    retire(s, "--seed", "--episode-seed")
+    s.set_defaults(handler=_scene)
+
     p = subparsers.add_parser("rollout", help="play a trajectory (or the scripted expert) and print the episode record")
     p.add_argument("--food", required=True, help="food name (see `grits-lab foods`)")
-    add_flag(p, "--level", deprecated=("--quantity",), required=True, help="quantity level of that food, e.g. low / medium / high")
-    p.add_argument("--seed", type=int, required=True, help="episode seed (world, particles, target bowl, expert)")
+    p.add_argument("--level", required=True, help="quantity level of that food, e.g. low / medium / high")
+    p.add_argument("--episode-seed", type=int, required=True, metavar="N", help="episode seed (world, particles, target bowl, expert)")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--trajectory", help="(T, 9) xyz + 6-D rotation or (T, 7) xyz + quaternion xyzw .npy, 10 Hz, world frame")
     src.add_argument("--expert", action="store_true", help="play the seeded, randomized scripted expert scoop")
@@ -24,19 +31,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print exactly one JSON object")
     p.add_argument("--video", help="render the episode: .gif or .mp4 (animation) or .png (image strip)")
     p.add_argument("--foods-file", help="a food YAML file instead of the packaged library")
+    retire(p, "--quantity", "--level")
+    retire(p, "--seed", "--episode-seed")
     p.set_defaults(handler=_rollout)
 
-    s = subparsers.add_parser("scene", help="print the scene geometry for a seed")
-    s.add_argument("--seed", type=int, required=True)
-    s.add_argument("--json", action="store_true", help="print exactly one JSON object")
-    s.set_defaults(handler=_scene)
 
+def _register_foods(subparsers: argparse._SubParsersAction) -> None:
     f = subparsers.add_parser("foods", help="list the foods with split, quantity levels and their settled fill heights")
     f.add_argument("--json", action="store_true", help="print exactly one JSON object")
     f.add_argument("--foods-file", help="a food YAML file instead of the packaged library")
     f.add_argument("--food", action="append", help="only this food (repeatable)")
-    f.add_argument("--seed", type=int, default=0, help="seed of the settled bowl whose fill height is measured")
+    f.add_argument("--bowl-seed", type=int, default=0, metavar="N", help="seed of the settled bowl whose fill height is measured (default 0)")
     f.add_argument("--no-settle", action="store_true", help="skip building and settling each level (no fill heights; instant)")
+    retire(f, "--seed", "--bowl-seed")
     f.set_defaults(handler=_foods)
 
 
@@ -74,7 +81,7 @@ def _rollout(args: argparse.Namespace) -> int:
                 frames.append(np.concatenate([im.rgb for im in images.values()], axis=1))
 
     try:
-        record, played = play_episode(env, args.food, args.level, args.seed, trajectory, on_step=on_step)
+        record, played = play_episode(env, args.food, args.level, args.episode_seed, trajectory, on_step=on_step)
     finally:
         env.close()
     if args.save_trajectory:
@@ -92,7 +99,7 @@ def _rollout(args: argparse.Namespace) -> int:
     if args.json:
         print(to_json(summary, indent=None))
     else:
-        for key in ("food", "split", "quantity", "seed", "n_particles", "spilled", "scooped", "spoon_coverage",
+        for key in ("protocol", "food", "split", "quantity", "seed", "n_particles", "spilled", "scooped", "spoon_coverage",
                     "scoop_success", "spillage", "scoop_failure", "first_spill_step", "ik_failures", "n_steps", "wall_time_s"):
             print(f"{key:>18}: {summary[key]}")
         if video is not None:
@@ -111,11 +118,11 @@ def _scene(args: argparse.Namespace) -> int:
 
     env = ScoopEnv()
     try:
-        env.reset(seed=args.seed, options={"n_particles": 0})
+        env.reset(seed=args.episode_seed, options={"n_particles": 0})
         scene = env.scene().to_dict()
     finally:
         env.close()
-    scene["seed"] = args.seed
+    scene["seed"] = args.episode_seed
     if args.json:
         print(to_json(scene, indent=None))
     else:
@@ -172,9 +179,9 @@ def _foods(args: argparse.Namespace) -> int:
     names = args.food or library.names()
     for name in names:
         library.get(name)  # unknown names fail before any world is built
-    rows = level_survey(library, names, seed=args.seed, settle=not args.no_settle, config=SimConfig(foods_file=args.foods_file))
+    rows = level_survey(library, names, seed=args.bowl_seed, settle=not args.no_settle, config=SimConfig(foods_file=args.foods_file))
     if args.json:
-        print(to_json({"seed": args.seed, "foods": rows}, indent=None))
+        print(to_json({"seed": args.bowl_seed, "foods": rows}, indent=None))
     else:
         for r in rows:
             parts = []

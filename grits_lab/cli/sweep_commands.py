@@ -20,6 +20,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="total trials the study should hold (overrides n_trials in the file)")
     parser.add_argument("--storage", default=None,
                         help="storage URL or journal file path (overrides `storage` in the file)")
+    parser.add_argument("--address", help="Ray cluster the trials' episodes run on (sets RAY_ADDRESS; an executor.address "
+                                          "in the evaluation config wins)")
     parser.add_argument("--report-only", action="store_true",
                         help="run no trial; rewrite the tables, best.yaml, the front/ overrides and plots from the storage")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
@@ -35,6 +37,10 @@ def _run(args: argparse.Namespace) -> int:
     if args.n_trials is not None and args.n_trials < 1:
         raise InputError(f"--n-trials must be >= 1. Got {args.n_trials}.")
     config = load_study_config(args.config)
+    if args.address:
+        import os
+
+        os.environ["RAY_ADDRESS"] = args.address  # the evaluation config's executor reads it (grits_lab/runners)
     summary = run_sweep(config, n_trials=args.n_trials, storage=args.storage, report_only=args.report_only,
                         plots=not args.no_plots, progress=not args.no_progress)
     _print_summary(summary, config.study_dir)

@@ -8,7 +8,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from grits_lab.cli.flags import add_flag
+from grits_lab.cli.flags import retire
 from grits_lab.io import to_json
 
 
@@ -21,9 +21,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ):
         parser = train_sub.add_parser(name, help=help_text)
         parser.add_argument("config", help=f"experiment YAML, e.g. {example}")
+        parser.add_argument("--output-dir", metavar="DIR", help="run directory (overrides output_dir in the config)")
         parser.add_argument("--max-steps", type=int, default=None, help="stop at this step instead of the config's max_steps")
-        add_flag(parser, "--restart", deprecated=("--fresh",), action="store_true", help="ignore the run's existing checkpoint and start from step 0")
+        parser.add_argument("--restart", action="store_true", help="ignore the run's existing checkpoint and start from step 0")
         parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+        retire(parser, "--fresh", "--restart")
         parser.set_defaults(handler=handler)
     _register_predictor(train_sub)
     train.set_defaults(handler=lambda args: _missing_subcommand(train))
@@ -44,6 +46,13 @@ def _check_max_steps(args: argparse.Namespace) -> None:
         raise InputError(f"--max-steps must be at least 1. Got {args.max_steps}.")
 
 
+def _writing_to(config: Any, args: argparse.Namespace) -> Any:
+    """`config` with `output_dir` from --output-dir when given."""
+    if args.output_dir:
+        config.output_dir = args.output_dir
+    return config
+
+
 def _print_summary(summary: dict[str, Any]) -> int:
     print(to_json(summary))
     return 0
@@ -54,7 +63,7 @@ def _train_policy(args: argparse.Namespace) -> int:
     from grits_lab.evaluation.rollouts import ScoopRollouts  # scoops during training, played in the simulator
     from grits_lab.policies.diffusion.training_diffusion import load_train_config, train_policy
 
-    return _print_summary(train_policy(load_train_config(args.config), max_steps=args.max_steps,
+    return _print_summary(train_policy(_writing_to(load_train_config(args.config), args), max_steps=args.max_steps,
                                        progress=not args.no_progress, restart=args.restart, rollouts=ScoopRollouts))
 
 
@@ -62,7 +71,7 @@ def _train_bc(args: argparse.Namespace) -> int:
     _check_max_steps(args)
     from grits_lab.policies.bc.training_bc import load_bc_config, train_bc
 
-    return _print_summary(train_bc(load_bc_config(args.config), max_steps=args.max_steps,
+    return _print_summary(train_bc(_writing_to(load_bc_config(args.config), args), max_steps=args.max_steps,
                                    progress=not args.no_progress, restart=args.restart))
 
 
@@ -79,6 +88,8 @@ def _register_predictor(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar or per-epoch lines")
     parser.add_argument("--eval", metavar="DATASET", help="only score a checkpoint on every chunk of this (held-out) spillage dataset")
     parser.add_argument("--checkpoint", default="best", help="with --eval: 'best', 'last' or a checkpoint path (default: best)")
+    parser.add_argument("--label", choices=["chunk", "horizon"],
+                        help="with --eval: score against this label (default: data.label, the one the predictor trained on)")
     parser.set_defaults(handler=_train_predictor)
 
 
@@ -105,6 +116,7 @@ def _train_predictor(args: argparse.Namespace) -> int:
 
     torch.set_num_threads(config.train.num_threads)
     path = run_dir(config) / f"{args.checkpoint}.pt" if args.checkpoint in ("best", "last") else Path(args.checkpoint)
-    report = {"checkpoint": str(path), **evaluate_predictor(load_predictor(path), args.eval, n_bins=config.train.ece_bins)}
-    write_json_atomic(run_dir(config) / f"eval_{Path(args.eval).name}.json", report)
+    report = {"checkpoint": str(path), **evaluate_predictor(load_predictor(path), args.eval, n_bins=config.train.ece_bins, label=args.label)}
+    suffix = "" if report["label"] == "chunk" else f"_{report['label']}"
+    write_json_atomic(run_dir(config) / f"eval_{Path(args.eval).name}{suffix}.json", report)
     return _print_summary(report)

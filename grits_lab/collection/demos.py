@@ -40,7 +40,7 @@ class ImageConfig:
 
 @dataclass
 class DemosConfig:
-    deprecated_keys: ClassVar[dict[str, str]] = {"output": "output_dir"}
+    retired_keys: ClassVar[dict[str, str]] = {"output": "output_dir"}
 
     kind: Literal["demos"] = "demos"
     output_dir: str = "results/datasets/demos"

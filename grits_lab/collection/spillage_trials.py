@@ -83,7 +83,7 @@ class ExitConfig:
 
 @dataclass
 class SpillageConfig:
-    deprecated_keys: ClassVar[dict[str, str]] = {"output": "output_dir", "trials": "episodes"}
+    retired_keys: ClassVar[dict[str, str]] = {"output": "output_dir", "trials": "episodes"}
 
     kind: Literal["spillage"] = "spillage"
     output_dir: str = "results/datasets/spillage"

@@ -5,9 +5,9 @@ misspelled key or a string where a number belongs fails on load with one line th
 dotted key, instead of surfacing as a confusing error deep inside a simulation or training run.
 Range checks live in each dataclass's `__post_init__` (use `require`).
 
-A key that was renamed stays readable: a dataclass declares `deprecated_keys: ClassVar[dict[str,
-str]] = {old: new}`, and a mapping that still says `old` loads as if it said `new`, with one line
-on stderr naming both (and an error if it says both).
+A key that was renamed is refused by its new name: a dataclass declares `retired_keys:
+ClassVar[dict[str, str]] = {old: new}`, and a mapping that still says `old` fails with one line
+naming `new` (docs/migration.md).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from typing import Any, Literal, TypeVar, Union, get_args, get_origin, get_type_
 
 import yaml
 
-from grits_lab.errors import ConfigError, warn_deprecated
+from grits_lab.errors import ConfigError
 
 T = TypeVar("T")
 
@@ -100,12 +100,14 @@ def config_from_dict(cls: type[T], data: Any, prefix: str = "") -> T:
     """Recursively build dataclass `cls` from a mapping; `prefix` is the dotted key path so far."""
     if not isinstance(data, dict):
         raise ConfigError(f"`{prefix or cls.__name__}` must be a mapping. Got {data!r}.")
-    data = _renamed(cls, data, prefix)
     hints = get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     unknown = sorted(set(data) - set(fields))
     if unknown:
         key = f"{prefix}.{unknown[0]}" if prefix else unknown[0]
+        renamed = getattr(cls, "retired_keys", {}).get(unknown[0])
+        if renamed is not None:
+            raise ConfigError(f"`{key}` is retired; use `{f'{prefix}.{renamed}' if prefix else renamed}` (docs/migration.md)")
         raise ConfigError(
             f"unknown key `{key}`; valid keys here: {', '.join(sorted(fields))}"
         )
@@ -122,23 +124,6 @@ def config_from_dict(cls: type[T], data: Any, prefix: str = "") -> T:
         if prefix and message.startswith("`") and not message.startswith(f"`{prefix}."):
             message = f"`{prefix}.{message[1:]}"
         raise ConfigError(message) from None
-
-
-def _renamed(cls: type, data: dict[str, Any], prefix: str) -> dict[str, Any]:
-    """`data` with each deprecated key of `cls` (its `deprecated_keys`, {old: new}) under its new name."""
-    renames = getattr(cls, "deprecated_keys", {})
-    if not set(data) & set(renames):
-        return data
-    dotted = lambda name: f"{prefix}.{name}" if prefix else name
-    out = {}
-    for name, value in data.items():
-        new = renames.get(name)
-        if new is not None:
-            if new in data:
-                raise ConfigError(f"`{dotted(name)}` is the deprecated name of `{dotted(new)}`; give only `{dotted(new)}`")
-            warn_deprecated(f"config key `{dotted(name)}`", f"`{dotted(new)}`")
-        out[new or name] = value
-    return out
 
 
 def _coerce(tp: Any, value: Any, key: str) -> Any:

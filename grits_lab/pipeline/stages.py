@@ -96,9 +96,8 @@ def _executor(data: dict[str, Any], workers: int | None, address: str | None) ->
 
 
 def _writing_to(data: dict[str, Any], path: Path) -> dict[str, Any]:
-    """`data` with `output_dir: path`; the stage file's old spellings of that key (`output`,
-    `results_dir`) are dropped, as the pipeline sets the key either way."""
-    return {**{k: v for k, v in data.items() if k not in ("output", "results_dir")}, "output_dir": str(path)}
+    """`data` with `output_dir: path` (a retired spelling of that key fails when the stage's config loads)."""
+    return {**data, "output_dir": str(path)}
 
 
 def wire(stage: str, data: dict[str, Any], layout: Layout, present: set[str],

@@ -183,7 +183,7 @@ class SyntheticConfig:
 class StudyConfig:
     """A sweep over GRITS's guidance weight rho and threshold s (paper Algorithm 1)."""
 
-    deprecated_keys: ClassVar[dict[str, str]] = {"results_dir": "output_dir"}
+    retired_keys: ClassVar[dict[str, str]] = {"results_dir": "output_dir"}
 
     study_name: str
     n_trials: int

@@ -1,5 +1,6 @@
-"""One flag per meaning: `--level`, `--output-dir`, `--restart`; each old spelling still parses to the
-same arguments and prints exactly one deprecation line to stderr."""
+"""One flag per meaning: `--level`, `--output-dir`, `--address`, `--restart` and one name per kind of
+seed; each retired spelling stops the command with one line naming the new one; `--help` lists the
+commands in the workflow's order."""
 
 from __future__ import annotations
 
@@ -8,18 +9,23 @@ import argparse
 import pytest
 
 from grits_lab.cli import build_parser, main
-from grits_lab.cli.flags import DeprecatedFlag, add_flag
 
-ROLLOUT = ["rollout", "--food", "sago", "--seed", "0", "--expert"]
+ROLLOUT = ["rollout", "--food", "sago", "--level", "low", "--expert"]
 
-# (command line with the old spelling, the same with the new one)
-RENAMED = [
-    (ROLLOUT + ["--quantity", "low"], ROLLOUT + ["--level", "low"]),
-    (["collect", "c.yaml", "--output", "d"], ["collect", "c.yaml", "--output-dir", "d"]),
-    (["report", "run", "--out", "d"], ["report", "run", "--output-dir", "d"]),
-    (["evaluate", "c.yaml", "--fresh"], ["evaluate", "c.yaml", "--restart"]),
-    (["train", "policy", "c.yaml", "--fresh"], ["train", "policy", "c.yaml", "--restart"]),
-    (["train", "bc", "c.yaml", "--fresh"], ["train", "bc", "c.yaml", "--restart"]),
+# (command line with a retired spelling, the spelling the error names)
+RETIRED = [
+    (["rollout", "--food", "sago", "--quantity", "low", "--episode-seed", "0", "--expert"], "--quantity", "--level"),
+    (ROLLOUT + ["--seed", "0"], "--seed", "--episode-seed"),
+    (["scene", "--seed", "4"], "--seed", "--episode-seed"),
+    (["foods", "--seed", "1"], "--seed", "--bowl-seed"),
+    (["collect", "c.yaml", "--seed", "1000"], "--seed", "--root-seed"),
+    (["compare-predictors", "a.yaml", "--eval", "h", "--seed", "3"], "--seed", "--bootstrap-seed"),
+    (["collect", "c.yaml", "--output", "d"], "--output", "--output-dir"),
+    (["report", "run", "--out", "d"], "--out", "--output-dir"),
+    (["compare-predictors", "a.yaml", "--eval", "h", "--out", "d"], "--out", "--output-dir"),
+    (["evaluate", "c.yaml", "--fresh"], "--fresh", "--restart"),
+    (["train", "policy", "c.yaml", "--fresh"], "--fresh", "--restart"),
+    (["train", "bc", "c.yaml", "--fresh"], "--fresh", "--restart"),
 ]
 
 
@@ -27,62 +33,54 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     return build_parser().parse_args(argv)
 
 
-@pytest.mark.parametrize("old, new", RENAMED, ids=lambda argv: " ".join(argv[:2]))
-def test_an_old_spelling_parses_like_the_new_one_and_warns_once(old, new, capsys):
-    assert vars(_parse(new)) == vars(_parse(new)) and capsys.readouterr().err == ""
-    assert vars(_parse(old)) == vars(_parse(new))
-    (old_flag,) = set(old) - set(new)
-    (new_flag,) = set(new) - set(old)
-    assert capsys.readouterr().err == f"grits-lab: {old_flag} is deprecated; use {new_flag}\n"
+@pytest.mark.parametrize("argv, old, new", RETIRED, ids=lambda v: " ".join(v[:2]) if isinstance(v, list) else v)
+def test_a_retired_spelling_fails_in_one_line_naming_the_new_one(argv, old, new, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"grits-lab: error: {old} is retired; use {new}") and err.count("\n") == 1
+    assert "docs/migration.md" in err
 
 
-def test_an_old_spelling_given_twice_still_warns_once(capsys):
-    args = _parse(["report", "run", "--out", "a", "--out", "b"])
-    assert args.output_dir == "b"
-    assert capsys.readouterr().err.count("deprecated") == 1
-
-
-def test_the_new_flags_parse_without_a_warning(capsys):
-    assert _parse(ROLLOUT + ["--level", "high"]).level == "high"
-    assert _parse(["collect", "c.yaml", "--output-dir", "d"]).output_dir == "d"
-    assert _parse(["report", "run", "--output-dir", "d"]).output_dir == "d"
+def test_each_seed_has_its_own_name_and_every_writer_and_ray_command_its_flag(capsys):
+    assert _parse(ROLLOUT + ["--episode-seed", "3"]).episode_seed == 3
+    assert _parse(["scene", "--episode-seed", "4"]).episode_seed == 4
+    assert _parse(["foods"]).bowl_seed == 0 and _parse(["foods", "--bowl-seed", "2"]).bowl_seed == 2
+    assert _parse(["collect", "c.yaml", "--root-seed", "1000"]).root_seed == 1000
+    assert _parse(["compare-predictors", "a.yaml", "--eval", "h", "--bootstrap-seed", "5"]).bootstrap_seed == 5
+    for argv in (["collect", "c.yaml"], ["train", "policy", "c.yaml"], ["train", "bc", "c.yaml"], ["train", "predictor", "c.yaml"],
+                 ["evaluate", "c.yaml"], ["report", "run"], ["compare-predictors", "a.yaml", "--eval", "h"]):
+        assert _parse([*argv, "--output-dir", "d"]).output_dir == "d", argv
+    for argv in (["collect", "c.yaml"], ["evaluate", "c.yaml"], ["sweep", "s.yaml"], ["pipeline", "p.yaml"]):
+        assert _parse([*argv, "--address", "10.0.0.1:6379"]).address == "10.0.0.1:6379", argv
     assert _parse(["evaluate", "c.yaml", "--restart"]).restart is True
     assert _parse(["evaluate", "c.yaml"]).restart is False
-    assert _parse(["train", "predictor", "c.yaml", "--restart", "--output-dir", "d"]).restart is True
-    assert _parse(["compare-predictors", "a.yaml", "--eval", "h", "--output-dir", "d"]).output_dir == "d"
     assert capsys.readouterr().err == ""
 
 
-def test_compare_predictors_keeps_out_as_a_deprecated_exact_directory(capsys):
-    args = _parse(["compare-predictors", "a.yaml", "--eval", "h", "--out", "cmp"])
-    assert args.out == "cmp" and args.output_dir is None
-    assert capsys.readouterr().err == ("grits-lab: --out is deprecated; use --output-dir "
-                                       "(the comparison goes to OUTPUT_DIR/comparison_<dataset>)\n")
+def test_train_output_dir_overrides_the_configs(tmp_path, capsys):
+    from grits_lab.cli.train_commands import _writing_to
+    from grits_lab.policies.diffusion.training_diffusion import load_train_config
+
+    config = load_train_config("experiments/policy_cpu.yaml")
+    assert _writing_to(config, _parse(["train", "policy", "c.yaml", "--output-dir", str(tmp_path)])).output_dir == str(tmp_path)
 
 
-def test_old_spellings_are_hidden_from_help(capsys):
+def test_retired_spellings_are_hidden_from_help(capsys):
     for argv in (["rollout", "--help"], ["collect", "--help"], ["report", "--help"], ["evaluate", "--help"],
-                 ["train", "policy", "--help"], ["compare-predictors", "--help"]):
+                 ["train", "policy", "--help"], ["compare-predictors", "--help"], ["foods", "--help"], ["scene", "--help"]):
         with pytest.raises(SystemExit):
             _parse(argv)
         text = capsys.readouterr().out
-        for old in ("--quantity", "--fresh", "--out ", "--output "):
+        for old in ("--quantity", "--fresh", "--out ", "--output ", "--seed "):
             assert old not in text, (argv, old)
 
 
-def test_a_required_flag_is_satisfied_by_either_spelling_but_not_by_both(capsys):
+def test_help_lists_the_commands_in_workflow_order_and_names_the_first_command(capsys):
     with pytest.raises(SystemExit):
-        main(["rollout", "--food", "sago", "--seed", "0", "--expert"])
-    assert "--level is required" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        _parse(ROLLOUT + ["--level", "low", "--quantity", "high"])
-    assert "not allowed with argument --level" in capsys.readouterr().err
-
-
-def test_the_helper_copies_nargs_and_type_of_the_new_flag(capsys):
-    parser = argparse.ArgumentParser()
-    add_flag(parser, "--stages", deprecated=("--stage",), nargs="+", type=int, default=[])
-    assert parser.parse_args(["--stage", "1", "2"]).stages == [1, 2]
-    assert parser.parse_args([]).stages == []
-    assert any(isinstance(a, DeprecatedFlag) and a.type is int and a.nargs == "+" for a in parser._actions)
-    assert capsys.readouterr().err.count("\n") == 1
+        _parse(["--help"])
+    text = capsys.readouterr().out
+    workflow = ["foods", "scene", "rollout", "collect", "dataset", "train", "compare-predictors", "evaluate", "replay",
+                "sweep", "report", "pipeline"]
+    listed = [line.split()[0] for line in text.split("COMMAND")[-1].splitlines() if line.startswith("    ") and not line.startswith("     ")]
+    assert [c for c in listed if c in workflow] == workflow
+    assert "first run: grits-lab pipeline experiments/quickstart.yaml" in text

@@ -35,7 +35,7 @@ def test_foods_json_lists_all_foods(capsys):
 
 
 def test_scene_json_has_the_geometry(capsys):
-    code, out, _ = run(capsys, "scene", "--seed", "4", "--json")
+    code, out, _ = run(capsys, "scene", "--episode-seed", "4", "--json")
     scene = json.loads(out)
     assert code == 0 and scene["seed"] == 4
     assert scene["source_bowl_rim_height"] == pytest.approx(0.065) and len(scene["cameras"]) == 2
@@ -47,7 +47,7 @@ def test_scene_json_has_the_geometry(capsys):
     (["--food", "orange", "--level", "low"], ["quantity level", "low"]),
 ])
 def test_unknown_food_or_level(capsys, argv, needles):
-    code, _, err = run(capsys, "rollout", *argv, "--seed", "0", "--expert")
+    code, _, err = run(capsys, "rollout", *argv, "--episode-seed", "0", "--expert")
     assert_one_line_error(code, err, *needles)
 
 
@@ -59,12 +59,12 @@ def test_unknown_food_or_level(capsys, argv, needles):
 def test_bad_trajectories(capsys, tmp_path, array, needle):
     path = tmp_path / "traj.npy"
     np.save(path, array)
-    code, _, err = run(capsys, "rollout", "--food", "orange", "--level", "medium", "--seed", "0", "--trajectory", str(path))
+    code, _, err = run(capsys, "rollout", "--food", "orange", "--level", "medium", "--episode-seed", "0", "--trajectory", str(path))
     assert_one_line_error(code, err, needle)
 
 
 def test_missing_trajectory_file(capsys, tmp_path):
-    code, _, err = run(capsys, "rollout", "--food", "orange", "--level", "medium", "--seed", "0", "--trajectory", str(tmp_path / "no.npy"))
+    code, _, err = run(capsys, "rollout", "--food", "orange", "--level", "medium", "--episode-seed", "0", "--trajectory", str(tmp_path / "no.npy"))
     assert_one_line_error(code, err, "not found")
 
 
@@ -74,7 +74,7 @@ def test_food_file_with_negative_mass(capsys, tmp_path):
                     "      - {shape: sphere, radius: [0.004, 0.005], mass: [-0.001, 0.001]}\n")
     code, _, err = run(capsys, "foods", "--foods-file", str(path))
     assert_one_line_error(code, err, "peas", "mass")
-    code, _, err = run(capsys, "rollout", "--food", "peas", "--level", "low", "--seed", "0", "--expert", "--foods-file", str(path))
+    code, _, err = run(capsys, "rollout", "--food", "peas", "--level", "low", "--episode-seed", "0", "--expert", "--foods-file", str(path))
     assert_one_line_error(code, err, "peas", "mass")
 
 
@@ -83,7 +83,7 @@ def test_rollout_of_a_quaternion_trajectory_prints_one_json_record(capsys, tmp_p
     traj = np.tile(np.array([0.5, 0.0, 0.22, 0.0, 0.0, 0.0, 1.0]), (10, 1))
     path, saved = tmp_path / "hold.npy", tmp_path / "played.npy"
     np.save(path, traj)
-    code, out, _ = run(capsys, "rollout", "--food", "orange", "--level", "medium", "--seed", "2",
+    code, out, _ = run(capsys, "rollout", "--food", "orange", "--level", "medium", "--episode-seed", "2",
                        "--trajectory", str(path), "--json", "--save-trajectory", str(saved))
     assert code == 0
     record = json.loads(out)
