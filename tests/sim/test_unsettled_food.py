@@ -41,7 +41,7 @@ def test_a_food_that_does_not_settle_inside_the_bowl_is_refused_at_reset(boulder
 
 
 def test_the_expert_rollout_of_that_food_exits_2_in_one_line_instead_of_reporting_a_spill(boulders, capsys):
-    code = main(["rollout", "--expert", "--food", "boulders", "--level", "low", "--seed", "0", "--foods-file", str(boulders), "--json"])
+    code = main(["rollout", "--expert", "--food", "boulders", "--level", "low", "--episode-seed", "0", "--foods-file", str(boulders), "--json"])
     out, err = capsys.readouterr()
     assert code == 2 and out == ""
     lines = err.strip().splitlines()
