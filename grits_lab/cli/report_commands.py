@@ -23,6 +23,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "sweep's tuned (rho, s) beside the paper's; a method run at several (rho, s) gets one row per setting")
     parser.add_argument("--output-dir", metavar="DIR", default=None, help="output directory (default: RUN_DIR/report)")
     retire(parser, "--out", "--output-dir")
+    parser.add_argument("--real", metavar="FILE.csv", action="append", default=[],
+                        help="real-robot trials (method, food, level, trial, task_success, spillage, scoop_failure; "
+                             "grits_lab/report/real_trials.py) shown beside the simulation and the paper; repeatable")
     parser.add_argument("--videos", metavar="N", type=int, default=0,
                         help="replay up to N episodes per food under Diffusion Policy and GRITS (same seed) and show the videos "
                              "side by side (needs the run's checkpoints; RUN_DIR must be a `grits-lab evaluate` run directory)")
@@ -48,7 +51,8 @@ def _run(args: argparse.Namespace) -> int:
         if missing:
             raise InputError(f"--videos replays episodes from a `grits-lab evaluate` run directory; {run_dir} lacks {', '.join(missing)}")
         replay = replay_episode
-    result = build_report(args.run_dir, args.output_dir, also=args.also, videos=args.videos, replay=replay, progress=True)
+    result = build_report(args.run_dir, args.output_dir, also=args.also, videos=args.videos, replay=replay, progress=True,
+                          real=args.real)
     print(f"report written to {result.out_dir} ({len(result.files)} files): {result.out_dir / 'report.html'}")
     for note in result.missing:
         print(f"  {note}")

@@ -24,6 +24,7 @@ from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atom
 from grits_lab.report import figures
 from grits_lab.report.run_records import RunData, load_run
 from grits_lab.report.provenance import episode_counts, error_messages, protocol_summary, report_provenance
+from grits_lab.report.real_robot import real_robot_table
 from grits_lab.report.guidance_effect import guidance_by_plan_table, guidance_figure, guidance_table, guided_episodes
 from grits_lab.report.headline import headline_sentence, headline_table
 from grits_lab.report.render import (
@@ -68,7 +69,7 @@ def default_out_dir(run_dir: str | Path) -> Path:
 
 def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also: Sequence[str | Path] = (),
                  videos: int = 0, replay: Callable[..., Any] | None = None, progress: bool = False,
-                 training: Sequence[str | Path] = ()) -> ReportResult:
+                 training: Sequence[str | Path] = (), real: Sequence[str | Path] = ()) -> ReportResult:
     """Write the report of RUN_DIR into `out_dir` (default RUN_DIR/report).
 
     also: further run directories whose episode records are reported beside RUN_DIR's (a method
@@ -82,9 +83,13 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also
 
     training: training run directories (policy, BC, predictor) whose `curves.png` files, found up
     to two folders deep, are shown in a "Training" section with each run's last logged values.
+
+    real: CSV files of real-robot trials (grits_lab/report/real_trials.py), shown with the
+    simulation and the paper's numbers in one table, "Real robot beside the simulation".
     """
     out = Path(out_dir) if out_dir is not None else default_out_dir(run_dir)
     run = load_run(run_dir, exclude=out, also=also)
+    real_table = real_robot_table(run.episodes, real) if real else None  # a bad file fails before anything is written
     ensure_writable_dir(out)
     result = ReportResult(out)
     sections = _results_sections(run, out, result) + _training_sections(training, out, result) + [_provenance_section(run, out, result)]
@@ -102,6 +107,8 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also
         f"Task protocol: {protocol_summary(run.episodes)} (docs/protocol.md).",
         Collapsed(f"Missing data: {len(missing)} notes (click to list)", missing) if missing else "Missing data: none.",
     ])
+    if real_table is not None:
+        sections.insert(0, Section("Real robot beside the simulation", [_table(real_table, out, result)]))
     sections.insert(0, overview)
     if run.episodes is not None and not is_sweep_records(run):
         headline = headline_table(run.episodes)
