@@ -22,6 +22,7 @@ LAYERS: list[set[str]] = [
     {"runners", "training"},  # generic engines: parallel episodes, the torch training utilities
     {"sim"},
     {"perception"},
+    {"task"},  # settings of the stages after the scoop, shared by evaluation and collection
     {"data"},  # storage only
     {"sampling"},
     {"policies", "spillage"},
@@ -105,7 +106,7 @@ def test_the_checker_sees_an_upward_import(tmp_path, monkeypatch):
     (fake / "data" / "leak.py").write_text("def f():\n    from grits_lab.evaluation.evaluation_run import evaluate\n")
     (fake / "data" / "fine.py").write_text("from ..sim import foods\nfrom . import format\n")
     monkeypatch.setattr(__import__(__name__, fromlist=["ROOT"]), "ROOT", fake)
-    assert _violations() == ["data/leak.py:2: data (layer 6) imports grits_lab.evaluation.evaluation_run (layer 9)"]
+    assert _violations() == ["data/leak.py:2: data (layer 7) imports grits_lab.evaluation.evaluation_run (layer 10)"]
 
 
 def test_every_package_exports_its_public_names_from_init():

@@ -1,0 +1,85 @@
+"""Settings of the task's stages after the scoop (transfer and pour), shared by the evaluation and the spillage trials' carry.
+
+They live below both jobs (grits_lab/evaluation runs the stages; grits_lab/collection runs them
+after a spillage trial's scoop, as its carry) so that each embeds the one class.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+from grits_lab.config import require
+
+
+@dataclass
+class TransferSettings:
+    """Stages 2 and 3: locate the target bowl from the cameras, move there without collision, pour
+    (docs/evaluation.md, "The task, stage by stage", gives each value's reason and source)."""
+
+    enabled: bool = True
+    clearance: float = 0.06  # metres the spoon keeps above the bowls' rims and the table on the way
+    # Peak speed of the spoon while transferring (m/s; commands at the control rate). With the
+    # min-jerk profile the mean is 0.53x and the peak acceleration about 0.1 m/s^2 on a 30-40 cm carry.
+    max_speed: float = 0.12
+    # "min_jerk": every straight segment of the lift and carry, and the pour's roll, goes from rest
+    # to rest on the minimum-jerk profile (what a motion planner's time-parameterization gives a
+    # robot); "constant": equal steps, full speed from the first action.
+    profile: Literal["min_jerk", "constant"] = "min_jerk"
+    level_steps: int = 10  # actions over which the lift turns the spoon level (one sudden turn swings the arm)
+    # "radial": on the way across, turn the spoon to point away from the robot's base over the
+    # target (the arm's natural posture there); "keep": keep the scoop's heading, which twists the
+    # wrist to its limit for targets off to the side.
+    heading: Literal["radial", "keep"] = "radial"
+    # Spoon centre above the target bowl's rim when pouring (m; negative: below it). At 5 mm the
+    # rolled spoon's lower lip ends about 2 cm below the rim, 1.5 cm above the bowl's floor.
+    pour_height: float = 0.005
+    # Place the spoon so that the lip the food leaves by, not its centre, is over the target's
+    # centre (2.6 cm along the spoon's width): poured food then lands mid-bowl, not by its wall.
+    pour_lip_over_centre: bool = True
+    pour_angle_deg: float = 120.0  # roll of the spoon about its x axis to empty it
+    # Actions of the roll: 3 s, a mean 40 deg/s; at the spoon's edge (2 cm) the roll's peak
+    # accelerations are under 0.05 m/s^2, so food slides out under gravity rather than being flung.
+    pour_steps: int = 30
+    settle_steps: int = 15  # actions holding still after the pour before counting
+    # Before moving, check the path and pour on the arm's kinematic copy (grits_lab/sim/env.py
+    # `check_path`). With `slow_to_limits`, every action asking a joint to move faster than the
+    # Panda's velocity limit (robot.PANDA_MAX_JOINT_VELOCITY) is slowed (cut into more actions, at
+    # most `max_slowdown` per planned action); a motion that still exceeds it is a change of arm
+    # posture and fails. Without it, a motion fails when a joint steps more than `max_joint_step`
+    # rad in one action. A motion that fails, or holds an unreachable pose, is replaced by the
+    # first alternative that passes: the lift with `alternative_level_steps` and the level spoon
+    # turned by `alternative_level_yaw_deg`, the pour from `alternative_pour_heights` and moved
+    # `alternative_pour_offsets` metres away from the robot's base (negative: towards it).
+    # At most `max_checks` options (about 1 s each on one core, more when slowed).
+    reach_check: bool = True
+    # The IK's null-space pull towards the arm's rest posture in these stages. Off: the arm follows
+    # the path with the least joint motion; on (as in the scoop, and in the transfer before its
+    # min-jerk version), an arm far from its rest posture swings shoulder against upper arm in
+    # one action however slowly it moves (measured 0.34 rad in 0.1 s, 1.6x the Panda's limit).
+    rest_pull: bool = False
+    slow_to_limits: bool = True
+    max_slowdown: int = 8
+    max_joint_step: float = 0.5
+    alternative_level_steps: list[int] = field(default_factory=lambda: [30])
+    alternative_level_yaw_deg: list[float] = field(default_factory=lambda: [-60.0, 60.0, -90.0, 90.0])
+    alternative_pour_heights: list[float] = field(default_factory=lambda: [0.02, 0.04])
+    alternative_pour_offsets: list[float] = field(default_factory=lambda: [0.03, -0.03])
+    max_checks: int = 16
+
+    def __post_init__(self) -> None:
+        require(self.clearance > 0, "transfer.clearance", self.clearance, "positive")
+        require(self.max_joint_step > 0, "transfer.max_joint_step", self.max_joint_step, "positive (rad per action)")
+        require(self.max_slowdown >= 1, "transfer.max_slowdown", self.max_slowdown, "at least 1")
+        require(not self.slow_to_limits or self.reach_check, "transfer.slow_to_limits", self.slow_to_limits,
+                "false when `transfer.reach_check` is false (slowing needs the arm's kinematic check)")
+        require(self.max_checks >= 1, "transfer.max_checks", self.max_checks, "at least 1")
+        require(all(int(n) >= 1 for n in self.alternative_level_steps), "transfer.alternative_level_steps",
+                self.alternative_level_steps, "a list of integers >= 1")
+        deep = "above -0.03 m (deeper, the rolled spoon meets the bowl's floor)"
+        require(self.pour_height > -0.03, "transfer.pour_height", self.pour_height, deep)
+        require(all(h > -0.03 for h in self.alternative_pour_heights), "transfer.alternative_pour_heights",
+                self.alternative_pour_heights, f"a list of heights {deep}")
+        require(self.max_speed > 0, "transfer.max_speed", self.max_speed, "positive")
+        require(self.pour_steps >= 1, "transfer.pour_steps", self.pour_steps, "at least 1")
+        require(self.level_steps >= 1, "transfer.level_steps", self.level_steps, "at least 1")
