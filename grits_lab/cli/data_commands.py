@@ -54,7 +54,12 @@ def _collect(args: argparse.Namespace) -> int:
         config.executor.address = args.address
     if args.serial:
         config.executor.backend = "serial"
-    summary = run_collection(config, progress=not args.no_progress)
+    carry = None
+    if config.kind == "spillage" and config.exit.carries():  # the evaluation's transfer and pour end each trial
+        from grits_lab.evaluation.carry import carry_to_target
+
+        carry = carry_to_target
+    summary = run_collection(config, progress=not args.no_progress, carry=carry)
     print(to_json(summary))
     return 0
 

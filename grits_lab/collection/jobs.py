@@ -27,11 +27,16 @@ def load_collect_config(path: str | Path) -> Any:
         raise ConfigError(f"{path}: {exc}") from None
 
 
-def run_collection(config: Any, progress: bool = True) -> dict[str, Any]:
+def run_collection(config: Any, progress: bool = True, carry: Any = None) -> dict[str, Any]:
     """Run a demos or spillage collection to `config.output_dir`, resuming what is already there.
 
+    carry: the transfer-and-pour runner a spillage config with `exit.kind: carry` needs
+    (grits_lab/evaluation/carry.py `carry_to_target`; `spillage_trials.Carry`), handed down by the
+    caller because collection does not import evaluation.
+
     Everything that can be checked is checked before the dataset directory is touched: the
-    episode plan (names of foods and levels), an existing dataset's config, and the Ray cluster.
+    episode plan (names of foods and levels), an existing dataset's config, the carry runner and
+    the Ray cluster.
     """
     from grits_lab.collection.driver import existing_manifest
     from grits_lab.io import ensure_writable_dir, exclusive_directory
@@ -43,15 +48,19 @@ def run_collection(config: Any, progress: bool = True) -> dict[str, Any]:
         from grits_lab.collection.demos import plan_demos
 
         specs = plan_demos(config)
-    elif config.base_trajectory is not None:  # a file or dataset the user named: read (and refused) before the directory exists
-        given_base = base_trajectory(config)
+    else:
+        from grits_lab.collection.spillage_trials import require_carry
+
+        require_carry(config, carry)
+        if config.base_trajectory is not None:  # a file or dataset the user named: read (and refused) before the directory exists
+            given_base = base_trajectory(config)
     check_reachable(cluster_address(config.executor))
     out = ensure_writable_dir(config.output_dir)
     with exclusive_directory(out, "collect"):  # one collector per dataset: two would write the same episodes
-        return _collect_in(config, specs, given_base, progress)
+        return _collect_in(config, specs, given_base, progress, carry)
 
 
-def _collect_in(config: Any, specs: list[Any] | None, given_base: np.ndarray | None, progress: bool) -> dict[str, Any]:
+def _collect_in(config: Any, specs: list[Any] | None, given_base: np.ndarray | None, progress: bool, carry: Any) -> dict[str, Any]:
     from grits_lab.collection.driver import DatasetWriter, run_fixed_job
     from grits_lab.runners.executor_config import make_executor
 
@@ -72,7 +81,7 @@ def _collect_in(config: Any, specs: list[Any] | None, given_base: np.ndarray | N
             with open(tmp, "wb") as fh:
                 np.save(fh, base)
     with make_executor(config.executor) as executor:
-        return run_spillage_job(config, executor, writer, base, source_bowl_region(config), progress=progress)
+        return run_spillage_job(config, executor, writer, base, source_bowl_region(config), progress=progress, carry=carry)
 
 
 def base_trajectory(config: Any) -> np.ndarray:

@@ -1,13 +1,16 @@
 """Spillage dataset: shifted mean-expert trajectories over random primitive foods, labelled by simulation, balanced.
 
-A candidate trial (shape, k) draws its particle parameters, its trajectory shift, the speed of its
-exit from the bowl and how far the spoon rolls once outside it from its own seed, runs the base
-scoop followed by the lift-and-exit (food falling off the spoon outside the bowl is spillage, as
-on the way to a transfer), and records the spilled count at every waypoint. The trajectory is
-cut into chunks of `n_action_steps` waypoints (the policy's); each chunk stores the composite
-and raw clouds observed at its start and whether the spilled count rose during it (contract 4).
-The label is 1 if any chunk spilled. Candidates are accepted in index order per shape until every
-(shape, label) bucket is full (`grits_lab.collection.balance`); the acceptance rate is reported.
+A candidate trial (shape, k) draws its particle parameters and its trajectory shift from its own
+seed, runs the shifted base scoop and then takes the load away from the bowl (`exit.kind`): by
+default the evaluation's own transfer and pour to the target bowl ("carry", run by the callable
+the job is handed), or the earlier lift-and-exit at a drawn speed ("exit"). It records the
+spilled count after every step. The scoop (with the exit, the whole trajectory) is cut into
+chunks of `n_action_steps` waypoints (the policy's); each chunk stores the composite and raw
+clouds observed at its start and two labels (grits_lab/data/chunk_labels.py): whether the
+spilled count rose during the chunk (the paper's), and whether food spilled from its first
+action until the load was delivered (horizon). The trial's label of each kind is 1 if any chunk's
+is. Candidates are accepted in index order per shape until every (shape, label) bucket of the
+label `balance_on` names is full (`grits_lab.collection.balance`); the acceptance rate is reported.
 """
 
 from __future__ import annotations
@@ -16,17 +19,24 @@ import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar, Literal
+from typing import Any, Callable, ClassVar, Literal
 
 import numpy as np
 
 from grits_lab.config import require
+from grits_lab.data.chunk_labels import TRIAL_LABELS, Label, chunk_labels, horizon_labels
 from grits_lab.perception.composite import CloudConfig
 from grits_lab.runners.executor_config import ExecutorConfig
 from grits_lab.runners.spec import EpisodeSpec
 from grits_lab.seeding import derive_seed, make_rng
 from grits_lab.sim.sim_config import SimConfig
 from grits_lab.sim.foods import SHAPES, ParticleRanges, primitive_food
+from grits_lab.task.transfer_settings import TransferSettings
+
+# The carry after a trial's scoop: carry(env, cloud_builder, seed, settings) runs the evaluation's
+# transfer and pour on the live env and returns its measurements (grits_lab/evaluation/carry.py
+# `carry_to_target`). Handed down by the job's caller: collection does not import evaluation.
+Carry = Callable[[Any, Any, int, TransferSettings], dict[str, Any]]
 
 
 @dataclass
@@ -46,9 +56,15 @@ class ShiftConfig:
 
 @dataclass
 class ExitConfig:
-    # The lift-and-exit after the scoop: the spoon leaves the bowl as it would on the way to a
-    # transfer, so food that falls off the spoon outside the bowl is spillage.
-    enabled: bool = True
+    # What takes the load away after the scoop; food that falls outside the bowl on the way is
+    # spillage, and the horizon label sees it.
+    enabled: bool = True  # false: the trial ends with its scoop
+    # "carry": the evaluation's own transfer and pour to the target bowl (`transfer`: its path,
+    # speed and settling; docs/evaluation.md), so a chunk's horizon label sees what its scoop leads
+    # to on the way `grits-lab evaluate` takes. "exit": the earlier lift-and-exit out of the bowl
+    # at a drawn speed (the keys below, which only it reads), as datasets made before the carry.
+    kind: Literal["carry", "exit"] = "carry"
+    transfer: TransferSettings = field(default_factory=TransferSettings)
     distance: float = 0.14  # spoon centre this far from the bowl axis at the end (outer rim: 8.6 cm)
     rise: float = 0.02  # metres gained on the way out
     # Average exit speed (m/s, eased in and out), drawn per trial: a brisk exit sheds a loaded
@@ -74,6 +90,15 @@ class ExitConfig:
         require(0 <= self.tilt_deg[0] <= self.tilt_deg[1] <= 90, "exit.tilt_deg", list(self.tilt_deg), "a range [low, high] with 0 <= low <= high <= 90")
         require(self.tilt_steps >= 1, "exit.tilt_steps", self.tilt_steps, "at least 1")
         require(self.hold_steps >= 0, "exit.hold_steps", self.hold_steps, "non-negative")
+        if self.kind == "carry":
+            require(self.transfer.enabled, "exit.transfer.enabled", self.transfer.enabled,
+                    "true with `exit.kind` carry (`exit.enabled: false` ends a trial with its scoop)")
+            require(tuple(self.tilt_deg) == (0.0, 0.0), "exit.tilt_deg", list(self.tilt_deg),
+                    "[0, 0] with `exit.kind` carry (the roll belongs to the lift-and-exit)")
+
+    def carries(self) -> bool:
+        """Whether trials end with the evaluation's transfer and pour."""
+        return self.enabled and self.kind == "carry"
 
     def direction_xy(self) -> np.ndarray:
         """Unit vector of the exit in the table plane."""
@@ -94,6 +119,10 @@ class SpillageConfig:
     spill_fraction: float = 0.5
     shapes: list[str] = field(default_factory=lambda: list(SHAPES))
     n_action_steps: int = 12  # waypoints per chunk: the policy's n_action_steps (authors' code: 12)
+    # The trial label whose (shape, label) buckets are filled: "chunk" (some chunk's own actions
+    # spilled, the paper's) or "horizon" (food spilled before the load was delivered). Both are
+    # stored either way; balance on the one the predictor will train on (`data.label`).
+    balance_on: Label = "chunk"
     # Base trajectory: a (T, 9)/(T, 7) .npy file or a demonstrations dataset directory (the mean
     # of its `action`s); null = the scripted expert: its nominal (unrandomized) scoop when
     # base_expert_plans is 0, else the time-normalized mean of that many randomized expert plans.
@@ -125,6 +154,12 @@ class SpillageConfig:
 
         identity = collection_identity(self)
         identity["trials"] = identity.pop("episodes")  # its name before the rename: datasets made then keep their fingerprint
+        # Keys added with the carry and the horizon label, left out at the values that make the data
+        # of before them, so datasets made then keep their fingerprint.
+        if self.balance_on == "chunk":
+            del identity["balance_on"]
+        if self.exit.kind == "exit" or not self.exit.enabled:
+            del identity["exit"]["kind"], identity["exit"]["transfer"]
         return identity
 
     def targets(self) -> dict[str, tuple[int, int]]:
@@ -146,8 +181,12 @@ class SpillageTrialParams:
     raw_cloud: bool
     shift: list[float]
     shift_scale: float
+    exit_kind: str = "none"  # what followed the scoop: "carry", "exit" or "none"
     exit_speed: float = 0.0
     exit_tilt_deg: float = 0.0
+    # With `exit.kind` carry: the transfer and pour run after the scoop, and their settings.
+    carry: Carry | None = None
+    transfer: TransferSettings | None = None
 
 
 CANDIDATE_LOG = "candidates.jsonl"
@@ -158,16 +197,9 @@ def candidate_id(shape: str, index: int) -> str:
     return f"{shape}-{index:06d}"
 
 
-def chunk_labels(spilled_over_time: np.ndarray, n_action_steps: int, spilled_before: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """(chunk_start (C,), chunk_spilled (C,)) from the spilled count after each waypoint (T,).
-
-    A chunk spilled if the count at its end exceeds the count just before its first waypoint.
-    """
-    counts = np.asarray(spilled_over_time, dtype=np.int64)
-    starts = np.arange(0, len(counts), n_action_steps, dtype=np.int32)
-    before = np.concatenate([[spilled_before], counts])
-    ends = np.minimum(starts + n_action_steps, len(counts))
-    return starts, before[ends] > before[starts]
+def trial_label(meta: dict[str, Any], label: Label) -> int:
+    """A trial's label of the given kind from its meta (datasets made before horizon labels have only "label")."""
+    return int(meta[TRIAL_LABELS[label]])
 
 
 class CandidateLog:
@@ -201,13 +233,19 @@ class CandidateLog:
             os.fsync(fh.fileno())
 
 
-def make_trial_spec(config: SpillageConfig, base: np.ndarray, bowl: dict[str, Any], shape: str, index: int) -> EpisodeSpec:
-    """The spec of candidate (shape, index): its seed, its shifted trajectory and its parameters."""
+def make_trial_spec(config: SpillageConfig, base: np.ndarray, bowl: dict[str, Any], shape: str, index: int,
+                    carry: Carry | None = None) -> EpisodeSpec:
+    """The spec of candidate (shape, index): its seed, its shifted trajectory and its parameters.
+
+    carry: the transfer-and-pour runner, required when the config's exit is the carry.
+    """
     from grits_lab.data.trajectories import append_exit, shift_trajectory
 
     seed = derive_seed(config.seed, "spillage", shape, index)
     exit_speed = exit_tilt = 0.0
-    if config.exit.enabled:
+    if config.exit.carries():
+        require_carry(config, carry)
+    elif config.exit.enabled:
         e = config.exit
         exit_speed = float(make_rng(derive_seed(seed, "exit")).uniform(*e.speed))
         tilt_rng = make_rng(derive_seed(seed, "exit-tilt"))
@@ -226,7 +264,9 @@ def make_trial_spec(config: SpillageConfig, base: np.ndarray, bowl: dict[str, An
     params = SpillageTrialParams(
         sim=config.sim, cloud=config.cloud, particles=config.particles, shape=shape, n_action_steps=config.n_action_steps,
         raw_cloud=config.raw_cloud, shift=[float(v) for v in shift], shift_scale=float(scale), exit_speed=exit_speed,
-        exit_tilt_deg=exit_tilt,
+        exit_tilt_deg=exit_tilt, exit_kind=config.exit.kind if config.exit.enabled else "none",
+        carry=carry if config.exit.carries() else None,
+        transfer=config.exit.transfer if config.exit.carries() else None,
     )
     return EpisodeSpec(
         episode_id=candidate_id(shape, index), work=spillage_trial, seed=seed, trajectory=traj.astype(np.float32),
@@ -234,8 +274,19 @@ def make_trial_spec(config: SpillageConfig, base: np.ndarray, bowl: dict[str, An
     )
 
 
-def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: np.ndarray, bowl: dict[str, Any], progress: bool = True) -> dict[str, Any]:
-    """Generate candidates until every (shape, label) bucket is full; write accepted trials."""
+def require_carry(config: SpillageConfig, carry: Carry | None) -> None:
+    """ConfigError unless the carry runner is given when the config's trials end with the carry."""
+    from grits_lab.errors import ConfigError
+
+    if config.exit.carries() and carry is None:
+        raise ConfigError("`exit.kind` is carry, but no carry runner was handed to the collection (`carry=`: "
+                          "grits_lab.evaluation.carry_to_target, which `grits-lab collect` passes); "
+                          "or set `exit.kind: exit`")
+
+
+def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: np.ndarray, bowl: dict[str, Any], progress: bool = True,
+                     carry: Carry | None = None) -> dict[str, Any]:
+    """Generate candidates until every (shape, `balance_on` label) bucket is full; write accepted trials."""
     from grits_lab.collection.balance import BalancedAcceptor
     from grits_lab.collection.driver import Progress, failure_details
 
@@ -275,7 +326,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
                 decide(acceptor.add(shape, k, logged[cid]["label"]), from_log=True)
             elif cid in on_disk:
                 acceptor.skip_to(shape, k + 1)
-                decide(acceptor.add(shape, k, int(on_disk[cid]["label"])), from_log=False)
+                decide(acceptor.add(shape, k, trial_label(on_disk[cid], config.balance_on)), from_log=False)
             else:
                 break
             k += 1
@@ -286,7 +337,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
     missing = [(e["shape"], int(e["index"])) for cid, e in logged.items() if e.get("accepted") and cid not in on_disk]
     while missing or executor.pending():
         while missing and executor.capacity() > 0:
-            executor.submit(make_trial_spec(config, base, bowl, *missing.pop(0)))
+            executor.submit(make_trial_spec(config, base, bowl, *missing.pop(0), carry=carry))
         for result in executor.poll():
             if result.ok:
                 writer.write(result.episode_id, result.payload)
@@ -303,7 +354,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
                 nxt = acceptor.next_candidate(by_shape)
                 if nxt is None:
                     break
-                spec = make_trial_spec(config, base, bowl, *nxt)
+                spec = make_trial_spec(config, base, bowl, *nxt, carry=carry)
                 executor.submit(spec)
                 in_flight[spec.episode_id] = nxt[0]
             if executor.pending() == 0:
@@ -312,7 +363,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
                 shape = in_flight.pop(result.episode_id)
                 index = int(result.episode_id.rsplit("-", 1)[1])
                 if result.ok:
-                    label = int(result.payload["meta"]["label"])
+                    label = trial_label(result.payload["meta"], config.balance_on)
                     payload = result.payload
                 else:
                     label, payload = None, None
@@ -326,6 +377,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
     summary = {
         "episodes": accepted,
         "requested": config.episodes,
+        "balanced_on": config.balance_on,
         "buckets": {f"{shape}/{label}": n for shape, c in counts.items() for label, n in c.items()},
         "targets": {f"{shape}/{label}": t[label] for shape, t in targets.items() for label in (0, 1)},
         "candidates_tried": stats["tried"],
@@ -371,7 +423,7 @@ def expert_mean_trajectory(config: SpillageConfig) -> np.ndarray:
 
 
 def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
-    """Run one candidate: random primitive food, the spec's trajectory, clouds at every chunk start."""
+    """Run one candidate: random primitive food, the spec's trajectory (clouds at every chunk start), then the carry."""
     from grits_lab.config import config_fingerprint
     from grits_lab.perception.env_clouds import builder_for_env, scene_clouds
     from grits_lab.sim.env import worker_env
@@ -396,7 +448,16 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         if terminated or truncated:
             break
     trajectory = trajectory[: len(spilled)]
-    chunk_start, chunk_spilled = chunk_labels(np.asarray(spilled), p.n_action_steps, spilled_before)
+    scooped = int(env.metrics()["scooped"])  # the load the carry takes away
+    carried: dict[str, Any] = {}
+    if p.carry is not None and scooped > 0:  # as in the evaluation: an empty spoon is not carried
+        assert p.transfer is not None
+        carried = p.carry(env, builder, spec.seed, p.transfer)
+    # The count after every step from the first action until the load was delivered: the scoop's
+    # steps, then the carry's (the env's tracker holds one entry per step).
+    until_delivery = np.asarray(env.tracker.history, dtype=np.int32)
+    chunk_start, chunk_spilled = chunk_labels(until_delivery, p.n_action_steps, spilled_before, n_steps=len(spilled))
+    chunk_spilled_horizon = horizon_labels(until_delivery, chunk_start, spilled_before)
     metrics = env.metrics()
     component = env.particle_parameters()[0] if count else {}
     arrays = {
@@ -404,7 +465,9 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "chunk_start": chunk_start.astype(np.int32),
         "chunk_cloud": np.stack(clouds)[: len(chunk_start)],
         "chunk_spilled": chunk_spilled.astype(bool),
+        "chunk_spilled_horizon": chunk_spilled_horizon.astype(bool),
         "spilled_over_time": np.asarray(spilled, dtype=np.int32),
+        "spilled_until_delivery": until_delivery,
     }
     if p.raw_cloud:
         arrays["chunk_cloud_raw"] = np.stack(clouds_raw)[: len(chunk_start)]
@@ -412,9 +475,14 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "shape": p.shape,
         "seed": spec.seed,
         "label": int(chunk_spilled.any()),
+        "label_horizon": int(chunk_spilled_horizon.any()),
+        "n_chunks": int(len(chunk_start)),
+        "n_chunks_spilled": int(chunk_spilled.sum()),
+        "n_chunks_spilled_horizon": int(chunk_spilled_horizon.sum()),
+        "spilled_at_start": spilled_before,
         "n_particles": int(metrics["n_particles"]),
         "spilled": int(metrics["spilled"]),
-        "scooped": int(metrics["scooped"]),
+        "scooped": scooped,
         "scoop_success": bool(metrics["scoop_success"]),
         "ik_failures": int(metrics["ik_failures"]),
         "n_action_steps": p.n_action_steps,
@@ -423,6 +491,7 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "shift_y": p.shift[1],
         "shift_z": p.shift[2],
         "shift_scale": p.shift_scale,
+        "exit_kind": p.exit_kind,
         "exit_speed": p.exit_speed,
         "exit_tilt_deg": p.exit_tilt_deg,
         "radius": float(component.get("radius", 0.0)),
@@ -432,4 +501,16 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "min_visible_food_points": int(min(visible)) if visible else -1,
         **metrics["spill_attribution"],
     }
+    if p.carry is not None:
+        meta["carry_steps"] = int(len(until_delivery) - len(spilled))
+    if carried:
+        meta.update({
+            "transferred": int(metrics["transferred"]),
+            "carry_plan": str(carried["plan"]),
+            "carry_reachable": carried["reachable"],
+            "carry_ik_failures": int(carried["ik_failures"]),
+            "carry_peak_speed_mps": float(carried["carry_peak_speed_mps"]),
+            # the spilled count when each stage ended (scoop, lift, carry, pour, after_pour)
+            **{f"spilled_after_{stage}": int(n) for stage, n in carried["spilled_by_stage"].items()},
+        })
     return {"arrays": arrays, "meta": meta}

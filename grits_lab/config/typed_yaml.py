@@ -122,8 +122,20 @@ def config_from_dict(cls: type[T], data: Any, prefix: str = "") -> T:
     except ConfigError as exc:  # a range check in __post_init__: name the key by its full path
         message = str(exc)
         if prefix and message.startswith("`") and not message.startswith(f"`{prefix}."):
-            message = f"`{prefix}.{message[1:]}"
+            message = f"`{_joined(prefix, message[1:])}"
         raise ConfigError(message) from None
+
+
+def _joined(prefix: str, key_and_rest: str) -> str:
+    """`prefix` + the key a check named, without repeating the part they share: a check of
+    TransferSettings names `transfer.clearance`; embedded as `exit.transfer` it is
+    `exit.transfer.clearance`, not `exit.transfer.transfer.clearance`."""
+    parts = prefix.split(".")
+    for n in range(len(parts), 0, -1):
+        shared = ".".join(parts[-n:]) + "."
+        if key_and_rest.startswith(shared):
+            return ".".join(parts[:-n] + [key_and_rest])
+    return f"{prefix}.{key_and_rest}"
 
 
 def _coerce(tp: Any, value: Any, key: str) -> Any:

@@ -5,6 +5,7 @@ trajectory arithmetic they use. It runs nothing; the jobs that fill datasets are
 grits_lab/collection.
 """
 
+from grits_lab.data.chunk_labels import LABEL_ARRAYS, LABELS, TRIAL_LABELS, chunk_labels, horizon_labels
 from grits_lab.data.format import (
     EPISODE_DIR,
     FORMAT_VERSION,
@@ -28,13 +29,18 @@ __all__ = [
     "EPISODE_DIR",
     "FORMAT_VERSION",
     "INDEX_FILE",
+    "LABELS",
+    "LABEL_ARRAYS",
     "MANIFEST_FILE",
     "MinMaxNormalizer",
+    "TRIAL_LABELS",
     "append_exit",
     "as_pose9",
+    "chunk_labels",
     "dataset_summary",
     "episode_path",
     "format_summary",
+    "horizon_labels",
     "list_episode_files",
     "load_index",
     "mean_trajectory",

@@ -7,6 +7,7 @@ from typing import Any
 
 import yaml
 
+from grits_lab.data.chunk_labels import TRIAL_LABELS
 from grits_lab.data.format import EPISODE_DIR, MANIFEST_FILE, load_index, rebuild_index
 from grits_lab.errors import StorageError
 from grits_lab.sim.spill_metrics import attribution_columns
@@ -34,16 +35,19 @@ def dataset_summary(path: str | Path) -> dict[str, Any]:
         "failed": len(list((path / "failures").glob("*.json"))),
         "size_mb": round(size / 2**20, 2),
     }
-    for column in ("food", "level", "shape", "label"):
+    config = manifest.get("config") if isinstance(manifest.get("config"), dict) else {}
+    balanced = TRIAL_LABELS[config.get("balance_on", "chunk")]  # the label a spillage dataset's buckets hold
+    for column in ("food", "level", "shape", "label", "label_horizon"):
         if column in index.columns:
-            out[f"by_{column}"] = {str(k): int(v) for k, v in index[column].value_counts().sort_index().items()}
-    if {"shape", "label"} <= set(index.columns):
+            out[f"by_{column}"] = {str(k): int(v) for k, v in index[column].dropna().value_counts().sort_index().items()}
+    if {"shape", balanced} <= set(index.columns):
         out["by_shape_label"] = {
-            f"{s}/{int(l)}": int(n) for (s, l), n in index.groupby(["shape", "label"]).size().items()
+            f"{s}/{int(l)}": int(n) for (s, l), n in index.dropna(subset=[balanced]).groupby(["shape", balanced]).size().items()
         }
-    for column in ("scoop_success", "spilled_any", "label"):
+    for column in ("scoop_success", "spilled_any", "label", "label_horizon"):
         if column in index.columns and len(index):
             out[f"mean_{column}"] = round(float(index[column].astype(float).mean()), 3)
+    out.update(chunk_label_rates(index))
     if {"food", "level", "scoop_success", "spilled_any"} <= set(index.columns) and len(index):
         out["by_food_level"] = {
             f"{food}/{level}": f"scoop success {int(g['scoop_success'].sum())}/{len(g)}, spilled {int(g['spilled_any'].sum())}/{len(g)}"
@@ -59,6 +63,23 @@ def dataset_summary(path: str | Path) -> dict[str, Any]:
     if "acceptance_rate" in summary:
         out["acceptance_rate"] = summary["acceptance_rate"]
     return out
+
+
+def chunk_label_rates(index: Any) -> dict[str, Any]:
+    """Share of chunks labelled spilled by each label, from the per-episode counts in the index
+    (spillage datasets collected with horizon labels): {"chunks": C, "chunk_rate_chunk": ..., "chunk_rate_horizon": ...}."""
+    needed = {"n_chunks", "n_chunks_spilled", "n_chunks_spilled_horizon"}
+    if not needed <= set(index.columns) or not len(index):
+        return {}
+    rows = index.dropna(subset=sorted(needed))
+    total = int(rows["n_chunks"].sum())
+    if total == 0:
+        return {}
+    return {
+        "chunks": total,
+        "chunk_rate_chunk": round(float(rows["n_chunks_spilled"].sum()) / total, 3),  # the count rose during the chunk
+        "chunk_rate_horizon": round(float(rows["n_chunks_spilled_horizon"].sum()) / total, 3),  # spilled before delivery
+    }
 
 
 def attribution_summary(rows: Any) -> dict[str, str]:

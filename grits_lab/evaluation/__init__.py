@@ -1,5 +1,6 @@
 """Evaluation of every method on the whole task (scoop -> transfer -> pour): registry, episodes, runs, sweep entry point."""
 
+from grits_lab.evaluation.carry import carry_to_target
 from grits_lab.evaluation.evaluation_config import EvaluationConfig, load_evaluation_config
 from grits_lab.evaluation.evaluation_run import episode_keys, evaluate, evaluate_file, evaluate_guidance
 from grits_lab.evaluation.grid import EpisodeGrid, EpisodeKey
@@ -11,6 +12,7 @@ __all__ = [
     "EpisodeKey",
     "EvaluationConfig",
     "MethodSpec",
+    "carry_to_target",
     "episode_keys",
     "evaluate",
     "evaluate_file",

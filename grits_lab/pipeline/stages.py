@@ -236,7 +236,12 @@ def _load_report(path: Path) -> Any:
 def _run_collect(stage: str, config: Any, layout: Layout, progress: bool) -> dict[str, Any]:
     from grits_lab.collection.jobs import run_collection
 
-    return run_collection(config, progress=progress)
+    carry = None
+    if config.kind == "spillage" and config.exit.carries():  # the evaluation's transfer and pour end each trial
+        from grits_lab.evaluation.carry import carry_to_target
+
+        carry = carry_to_target
+    return run_collection(config, progress=progress, carry=carry)
 
 
 def _run_policy(stage: str, config: Any, layout: Layout, progress: bool) -> dict[str, Any]:

@@ -226,3 +226,68 @@ def test_a_dataset_of_another_protocol_is_refused_and_a_new_one_names_its_own(tm
     manifest_path.write_text(yaml.safe_dump({**manifest, "protocol": "scoop-v3"}, sort_keys=False))
     with pytest.raises(StorageError, match=rf"holds a dataset of protocol scoop-v3, but this code runs {PROTOCOL}"):
         run_collection(config, progress=False)
+
+
+def _carry_config(tmp_path, **overrides):
+    data = {
+        "kind": "spillage", "output_dir": str(tmp_path / "carry"), "episodes": 2, "spill_fraction": 0.0, "shapes": ["sphere"],
+        "balance_on": "horizon", "particles": {"fill_height": [0.012, 0.012], "radius": [0.006, 0.008]},
+        "cloud": {"n_points": 128, "cad_surface_samples": 1000}, "sim": {"cameras": SMALL_CAMERAS},
+        "executor": {"backend": "serial"}, "exit": {"kind": "carry"}, "raw_cloud": False,
+    }
+    data.update(overrides)
+    return config_from_dict(SpillageConfig, data)
+
+
+def test_a_carry_collection_stores_both_labels_and_the_carry_stages(tmp_path):
+    from grits_lab.data.info import dataset_summary
+    from grits_lab.evaluation.carry import carry_to_target
+
+    config = _carry_config(tmp_path)
+    summary = run_collection(config, progress=False, carry=carry_to_target)
+    assert summary["episodes"] == 2 and summary["balanced_on"] == "horizon"
+    episodes = [read_episode(p) for p in list_episode_files(config.output_dir)]
+    carried = 0
+    for arrays, meta in episodes:
+        c = len(arrays["chunk_start"])
+        assert arrays["chunk_spilled"].shape == arrays["chunk_spilled_horizon"].shape == (c,)
+        assert meta["exit_kind"] == "carry" and meta["label_horizon"] == 0  # the no-spill bucket of the horizon label
+        assert len(arrays["spilled_until_delivery"]) == meta["steps"] + meta["carry_steps"]
+        np.testing.assert_array_equal(arrays["spilled_until_delivery"][: meta["steps"]], arrays["spilled_over_time"])
+        if meta["scooped"] > 0:  # a load was lifted: the evaluation's transfer and pour took it to the target bowl
+            carried += 1
+            assert meta["carry_steps"] > 30 and meta["carry_plan"].startswith("level over")
+            assert {f"spilled_after_{stage}" for stage in ("lift", "carry", "pour", "after_pour")} <= set(meta)
+    assert carried >= 1
+    info = dataset_summary(config.output_dir)
+    assert info["mean_label"] == 0.0 and info["mean_label_horizon"] == 0.0
+    assert info["chunks"] == sum(len(a["chunk_start"]) for a, _ in episodes) and info["chunk_rate_horizon"] == 0.0
+    assert info["by_shape_label"] == {"sphere/0": 2} and info["status"] == "complete"
+
+
+def test_a_carry_collection_without_the_carry_runner_is_refused_before_the_dataset_exists(tmp_path):
+    from grits_lab.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"`exit.kind` is carry, but no carry runner"):
+        run_collection(_carry_config(tmp_path), progress=False)
+    assert not (tmp_path / "carry").exists()
+
+
+@pytest.mark.parametrize("override, key", [
+    ({"exit": {"kind": "teleport"}}, "exit.kind"),
+    ({"exit": {"kind": "carry", "transfer": {"clearance": -0.01}}}, "exit.transfer.clearance"),
+    ({"exit": {"kind": "carry", "tilt_deg": [10, 20]}}, "exit.tilt_deg"),
+    ({"balance_on": "future"}, "balance_on"),
+])
+def test_carry_and_label_config_errors_name_the_key(tmp_path, override, key):
+    from grits_lab.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=rf"^`{key}`"):
+        _carry_config(tmp_path, **override)
+
+
+def test_a_lift_and_exit_config_keeps_the_fingerprint_of_datasets_made_before_the_carry():
+    identity = config_from_dict(SpillageConfig, {"exit": {"kind": "exit"}}).identity()
+    assert "balance_on" not in identity and not {"kind", "transfer"} & set(identity["exit"])
+    carry = config_from_dict(SpillageConfig, {"balance_on": "horizon"}).identity()
+    assert carry["exit"]["kind"] == "carry" and carry["balance_on"] == "horizon" and carry["exit"]["transfer"]["max_speed"] == 0.12

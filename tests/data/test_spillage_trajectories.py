@@ -79,7 +79,7 @@ def test_a_tilted_exit_rolls_the_spoon_outside_the_bowl_about_its_direction_of_t
 
 
 def test_exit_tilts_are_drawn_per_trial_within_range_with_either_sign():
-    config = config_from_dict(SpillageConfig, {"exit": {"tilt_deg": [10.0, 40.0]}})
+    config = config_from_dict(SpillageConfig, {"exit": {"kind": "exit", "tilt_deg": [10.0, 40.0]}})
     bowl, base = source_bowl_region(config), expert_mean_trajectory(config)
     tilts = np.array([make_trial_spec(config, base, bowl, "cube", k).params["trial"].exit_tilt_deg for k in range(30)])
     assert np.all((np.abs(tilts) >= 10.0) & (np.abs(tilts) <= 40.0))
@@ -90,7 +90,7 @@ def test_exit_tilts_are_drawn_per_trial_within_range_with_either_sign():
 def _run_candidate(tilt_deg: float) -> dict:
     config = config_from_dict(SpillageConfig, {
         "particles": {"fill_height": [0.02, 0.02], "radius": [0.005, 0.005]}, "shift": {"x": 0.0, "y": 0.0, "z": 0.0},
-        "exit": {"tilt_deg": [tilt_deg, tilt_deg], "speed": [0.4, 0.4]}, "raw_cloud": False, "cloud": {"n_points": 64},
+        "exit": {"kind": "exit", "tilt_deg": [tilt_deg, tilt_deg], "speed": [0.4, 0.4]}, "raw_cloud": False, "cloud": {"n_points": 64},
     })
     spec = make_trial_spec(config, expert_mean_trajectory(config), source_bowl_region(config), "sphere", 0)
     ctx = WorkerContext()
@@ -131,7 +131,7 @@ def test_the_default_exit_is_reachable_at_the_extremes_of_shift_and_tilt():
 
 
 def test_trial_specs_are_data_of_their_seed_and_end_outside_the_bowl():
-    config = SpillageConfig()
+    config = config_from_dict(SpillageConfig, {"exit": {"kind": "exit"}})
     bowl = source_bowl_region(config)
     base = expert_mean_trajectory(config)
     a = make_trial_spec(config, base, bowl, "cone", 3)
@@ -144,7 +144,7 @@ def test_trial_specs_are_data_of_their_seed_and_end_outside_the_bowl():
     assert min(speeds) >= config.exit.speed[0] and max(speeds) <= config.exit.speed[1]
     end = a.trajectory[-1, :2] - bowl["center"][:2]
     assert np.linalg.norm(end) > BOWL.outer_radius
-    bad = {"exit": {"tilt_deg": [30.0, 10.0]}}
+    bad = {"exit": {"kind": "exit", "tilt_deg": [30.0, 10.0]}}
     with pytest.raises(ConfigError, match="exit.tilt_deg"):
         config_from_dict(SpillageConfig, bad)
     off = config_from_dict(SpillageConfig, {"exit": {"enabled": False}})
