@@ -119,7 +119,8 @@ def test_tipping_the_loaded_spoon_over_the_table_spills(env, scooped):
     by_spoon = rec.spill_attribution["spilled_scoop_off_spoon"] + rec.spill_attribution["spilled_scoop_posture_flip"]
     assert by_spoon == rec.spilled == sum(rec.spill_attribution.values())
     first_over = int(np.argmax(ratios > 1.0))
-    assert rec.spilled_over_time[len(traj) + first_over - 1] == rec.spill_attribution["spilled_scoop_off_spoon"] > 0
+    offset = len(rec.spilled_over_time) - len(path)  # the steps this env took before the tip
+    assert rec.spilled_over_time[offset + first_over - 1] == rec.spill_attribution["spilled_scoop_off_spoon"] > 0
 
 
 def test_food_thrown_by_a_tip_faster_than_a_panda_can_move_is_attributed_to_the_arm(env):
