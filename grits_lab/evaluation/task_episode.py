@@ -131,18 +131,25 @@ def rollout_chunk_episode(chunks: dict[str, Any], n_action_steps: int, meta: dic
 
     Arrays: trajectory (T, 9) executed actions; chunk_start (C,) int32; chunk_cloud (C, 3, N, 3)
     float16, the composite cloud when the chunk started; chunk_spilled (C,) bool, whether the
-    spilled count rose while the chunk's `n_action_steps` actions ran. Only whole chunks are kept
-    (the predictor judges `n_action_steps` actions); labels come from the simulation's particle states.
+    spilled count rose while the chunk's `n_action_steps` actions ran; chunk_spilled_horizon (C,)
+    bool, whether food spilled from the chunk's first action until the end of the task (the rest of
+    the scoop, the transfer and the pour: `chunks["spilled_until_delivery"]`, the count after every
+    step of the episode, when the caller recorded it; else until the scoop's end). Only whole chunks
+    are kept (the predictor judges `n_action_steps` actions); labels come from the simulation's particle states.
     """
+    from grits_lab.data.chunk_labels import horizon_labels
+
     actions = np.asarray(chunks["actions"], dtype=np.float32).reshape(-1, 9)
     spilled = np.asarray(chunks["spilled_over_time"], dtype=np.int64)
-    starts, clouds, labels = [], [], []
+    until_delivery = np.asarray(chunks.get("spilled_until_delivery", spilled), dtype=np.int64)
+    starts, clouds, labels, horizon = [], [], [], []
     for start, cloud, before in chunks["log"]:
         if start + n_action_steps > len(actions):
             continue
         starts.append(start)
         clouds.append(np.asarray(cloud, dtype=np.float16))
         labels.append(bool(spilled[start + n_action_steps - 1] > before))
+        horizon.append(bool(horizon_labels(until_delivery[start:], [0], before)[0]))
     if not starts:
         return None
     arrays = {
@@ -150,10 +157,13 @@ def rollout_chunk_episode(chunks: dict[str, Any], n_action_steps: int, meta: dic
         "chunk_start": np.asarray(starts, dtype=np.int32),
         "chunk_cloud": np.stack(clouds),
         "chunk_spilled": np.asarray(labels, dtype=bool),
+        "chunk_spilled_horizon": np.asarray(horizon, dtype=bool),
         "spilled_over_time": spilled[: len(actions)].astype(np.int32),
+        "spilled_until_delivery": until_delivery.astype(np.int32),
     }
-    return {"arrays": arrays, "meta": {**meta, "label": int(any(labels)), "n_action_steps": int(n_action_steps),
-                                       "steps": int(len(actions)), "n_chunks": len(starts)}}
+    return {"arrays": arrays, "meta": {**meta, "label": int(any(labels)), "label_horizon": int(any(horizon)),
+                                       "n_action_steps": int(n_action_steps), "steps": int(len(actions)), "n_chunks": len(starts),
+                                       "n_chunks_spilled": int(sum(labels)), "n_chunks_spilled_horizon": int(sum(horizon))}}
 
 
 def summarize_guidance(diagnostics: list[dict[str, Any]]) -> dict[str, Any]:
@@ -333,6 +343,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
     record.update(final["spill_attribution"])
     if record_chunks:
         n_exec = config.scoop.n_action_steps or getattr(controller, "n_action_steps", None) or 12
+        scoop["chunks"]["spilled_until_delivery"] = list(env.tracker.history)  # through the transfer and pour
         record["_chunks"] = rollout_chunk_episode(scoop["chunks"], int(n_exec), {
             "food": food, "level": level, "seed": int(seed), "shape": food, "spilled": int(m["spilled"]),
             "scooped": int(m["scooped"]), "scoop_success": bool(m["scoop_success"])})

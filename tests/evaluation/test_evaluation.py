@@ -186,6 +186,13 @@ def test_rollout_chunks_are_a_dataset_the_predictor_scores(models, tmp_path):
     assert meta["label"] == int(arrays["chunk_spilled"].any()) and meta["spilled"] == records.iloc[0]["spilled"]
     predictions = predict_all({"full": Path(models["predictor"])}, dataset)
     assert len(predictions) == c and predictions["p_full"].between(0, 1).all()
+    # The horizon label sees the whole task: the count through the transfer and pour, from each chunk's start.
+    until = arrays["spilled_until_delivery"]
+    assert len(until) > len(arrays["trajectory"]) and until[-1] == records.iloc[0]["spilled_total"]
+    assert np.all(arrays["chunk_spilled_horizon"] >= arrays["chunk_spilled"])
+    assert meta["label_horizon"] == int(arrays["chunk_spilled_horizon"].any())
+    horizon = predict_all({"full": Path(models["predictor"])}, dataset, label="horizon")
+    np.testing.assert_array_equal(horizon["label"].to_numpy().astype(bool), arrays["chunk_spilled_horizon"])
 
 
 def test_the_policy_holds_when_its_own_proposal_holds_whatever_guidance_adds():
