@@ -172,3 +172,22 @@ def test_replaying_a_built_in_method_never_imports_the_lab_files_a_run_config_na
     result = replay_episode(copied, **episode(records, "dp"))
     assert result.matches, result.describe()
     assert not marker.exists()
+
+
+def test_a_planted_checkpoint_with_its_digest_in_the_records_is_refused_and_never_runs(run, tmp_path, plant_pickle):
+    import yaml
+
+    from grits_lab.evaluation.methods import file_digest
+
+    run_dir, records = run
+    config = yaml.safe_load((run_dir / "config.yaml").read_text())
+    planted = tmp_path / "policy.pt"
+    marker = plant_pickle(config["checkpoints"]["policy"], planted)
+    frame = records.copy()
+    frame["checkpoint_policy"] = file_digest(planted)  # whoever can write the run directory can write its records
+    copied = run_copy(run_dir, tmp_path / "copied", frame)
+    config["checkpoints"]["policy"] = str(planted)
+    (copied / "config.yaml").write_text(yaml.safe_dump(config))
+    with pytest.raises(InputError, match=f"refused checkpoint {planted}"):
+        replay_episode(copied, **episode(records, "dp"))
+    assert not marker.exists()
