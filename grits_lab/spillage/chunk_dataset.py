@@ -1,8 +1,10 @@
 """Chunk-level training samples streamed from a spillage dataset (contract 4, kind "spillage").
 
 One sample = (trajectory[chunk_start[c] : chunk_start[c] + L] normalized, chunk_cloud[c]
-normalized, chunk_spilled[c]): the L = 12 actions the policy is about to execute, the cloud
-observed when the chunk starts, and whether the spilled count rose during the chunk. Episodes
+normalized, label[c]): the L = 12 actions the policy is about to execute, the cloud observed when
+the chunk starts, and the chunk's label of the kind asked for (grits_lab/data/chunk_labels.py):
+`chunk_spilled` (the count rose during the chunk) or `chunk_spilled_horizon` (food spilled from
+its first action until the load was delivered). Episodes
 are split into train and validation by episode (never by chunk: chunks of one episode share a
 scene, and splitting them would leak it), optionally holding out one particle shape.
 """
@@ -18,6 +20,7 @@ import torch
 from torch.utils.data import IterableDataset
 
 from grits_lab.config import load_yaml
+from grits_lab.data.chunk_labels import LABEL_ARRAYS, TRIAL_LABELS
 from grits_lab.data.format import (
     CHUNK_KEY,
     EPISODE_DIR,
@@ -45,9 +48,11 @@ class EpisodeSplit:
     val: list[str]
 
 
-def check_spillage_dataset(dataset_dir: str | Path, n_action_steps: int | None = None, key: str = "model.n_action_steps") -> Any:
-    """The dataset's index (DataFrame) after checking that it exists, is of kind "spillage" and,
-    given `n_action_steps`, that its labels judge chunks of that many actions (ConfigError naming `key`).
+def check_spillage_dataset(dataset_dir: str | Path, n_action_steps: int | None = None, key: str = "model.n_action_steps",
+                           label: str = "chunk", label_key: str = "data.label") -> Any:
+    """The dataset's index (DataFrame) after checking that it exists, is of kind "spillage",
+    given `n_action_steps`, that its labels judge chunks of that many actions (ConfigError naming `key`),
+    and that it holds the `label` asked for (ConfigError naming `label_key`).
     Datasets collected before the key took the policy's name record it as `chunk_len`."""
     dataset_dir = Path(dataset_dir)
     if not (dataset_dir / EPISODE_DIR).is_dir():
@@ -71,6 +76,11 @@ def check_spillage_dataset(dataset_dir: str | Path, n_action_steps: int | None =
                 f"`{key}` is {n_action_steps}, but the spillage dataset at {dataset_dir} was collected with "
                 f"n_action_steps {', '.join(map(str, sorted(collected)))}: its labels judge chunks of that many actions"
             )
+    if TRIAL_LABELS[label] not in index.columns or index[TRIAL_LABELS[label]].isna().any():
+        raise ConfigError(
+            f"`{label_key}` is {label}, but the spillage dataset at {dataset_dir} has episodes without "
+            f"{LABEL_ARRAYS[label]} (collected before horizon labels); collect it again or use label chunk"
+        )
     return index
 
 
@@ -98,20 +108,21 @@ def split_spillage_episodes(index: Any, val_fraction: float, seed: int, holdout_
     return EpisodeSplit(train=train, val=val)
 
 
-def load_chunks(path: Path, cloud_key: str) -> dict[str, np.ndarray]:
-    """The arrays one episode contributes, checked for presence and consistent chunk counts."""
+def load_chunks(path: Path, cloud_key: str, label_key: str = "chunk_spilled") -> dict[str, np.ndarray]:
+    """The arrays one episode contributes, checked for presence and consistent chunk counts;
+    "label" is the `label_key` array (chunk_spilled or chunk_spilled_horizon)."""
     arrays, _ = read_episode(path, keys=None)
-    missing = [k for k in (*REQUIRED, cloud_key) if k not in arrays]
+    missing = [k for k in (*REQUIRED, label_key, cloud_key) if k not in arrays]
     if missing:
         raise StorageError(f"{path}: spillage episode lacks {', '.join(missing)}")
     n_chunks = len(arrays["chunk_start"])
-    if len(arrays["chunk_spilled"]) != n_chunks or len(arrays[cloud_key]) != n_chunks:
-        raise StorageError(f"{path}: chunk_start, chunk_spilled and {cloud_key} differ in length")
+    if len(arrays[label_key]) != n_chunks or len(arrays[cloud_key]) != n_chunks:
+        raise StorageError(f"{path}: chunk_start, {label_key} and {cloud_key} differ in length")
     require_finite(arrays, path, ("trajectory", cloud_key))
     return {
         "trajectory": arrays["trajectory"].astype(np.float32),
         "chunk_start": arrays["chunk_start"].astype(np.int64),
-        "chunk_spilled": arrays["chunk_spilled"].astype(bool),
+        "label": arrays[label_key].astype(bool),
         "cloud": arrays[cloud_key],
     }
 
@@ -149,7 +160,8 @@ def fit_normalizers(dataset_dir: Path, files: list[str], cloud_key: str, scale: 
 
 
 class SpillageChunkDataset(IterableDataset):
-    """Streams `(traj_norm (L, 9), cloud_norm (3, n, 3), label)` samples episode by episode.
+    """Streams `(traj_norm (L, 9), cloud_norm (3, n, 3), label)` samples episode by episode; the
+    label is the `label_key` array's (chunk_spilled, the default, or chunk_spilled_horizon).
 
     With `shuffle`, the episode order and a shuffle buffer of `buffer_size` samples are drawn
     afresh each epoch (call `set_epoch`), and so are the point subsets; without it the order and
@@ -170,6 +182,7 @@ class SpillageChunkDataset(IterableDataset):
         seed: int = 0,
         cache: bool = True,
         buffer_size: int = 2048,
+        label_key: str = "chunk_spilled",
     ) -> None:
         self.dataset_dir = Path(dataset_dir)
         self.files = list(files)
@@ -182,6 +195,7 @@ class SpillageChunkDataset(IterableDataset):
         self.seed = seed
         self.cache = cache
         self.buffer_size = buffer_size
+        self.label_key = label_key
         self.epoch = 0
         self._cache: dict[str, dict[str, np.ndarray]] = {}
 
@@ -191,7 +205,7 @@ class SpillageChunkDataset(IterableDataset):
     def _episode(self, file: str) -> dict[str, np.ndarray]:
         if file in self._cache:
             return self._cache[file]
-        chunks = load_chunks(self.dataset_dir / file, self.cloud_key)
+        chunks = load_chunks(self.dataset_dir / file, self.cloud_key, self.label_key)
         if self.cache:
             self._cache[file] = chunks
         return chunks
@@ -205,7 +219,7 @@ class SpillageChunkDataset(IterableDataset):
             yield (
                 torch.from_numpy(np.ascontiguousarray(window)),
                 torch.from_numpy(self.cloud_normalizer.normalize(cloud)),
-                int(ep["chunk_spilled"][c]),
+                int(ep["label"][c]),
             )
 
     def __iter__(self) -> Iterator[tuple[torch.Tensor, torch.Tensor, int]]:
@@ -228,7 +242,7 @@ class SpillageChunkDataset(IterableDataset):
 
     def _chunk_labels(self) -> list[np.ndarray]:
         """Each file's chunk labels, in file order (reads only the label arrays)."""
-        return [read_episode(self.dataset_dir / f, keys=["chunk_spilled"])[0]["chunk_spilled"].astype(bool) for f in self.files]
+        return [read_episode(self.dataset_dir / f, keys=[self.label_key])[0][self.label_key].astype(bool) for f in self.files]
 
     def sample_episodes(self) -> np.ndarray:
         """The episode file of every sample in the unshuffled order."""

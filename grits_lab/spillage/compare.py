@@ -19,6 +19,11 @@ from grits_lab.errors import InputError
 from grits_lab.io import atomic_path, ensure_writable_dir, save_parquet_atomic, write_json_atomic, write_text_atomic
 from grits_lab.spillage.classifier_metrics import classification_report, paired_bootstrap, reliability_bins
 
+LABEL_MEANING = {
+    "chunk": "the spilled count rose during the chunk's own actions",
+    "horizon": "food spilled from the chunk's first action until the load was delivered",
+}
+
 
 @dataclass
 class Comparison:
@@ -27,9 +32,11 @@ class Comparison:
     reference: str
     n_resamples: int
     n_bins: int = 10  # reliability bins, as for the ECE in the table
+    label: str = "chunk"  # what the `label` column says: "chunk" or "horizon" (grits_lab/data/chunk_labels.py)
 
 
-def compare_predictions(predictions: pd.DataFrame, models: list[str], n_resamples: int = 2000, seed: int = 0, n_bins: int = 10) -> Comparison:
+def compare_predictions(predictions: pd.DataFrame, models: list[str], n_resamples: int = 2000, seed: int = 0, n_bins: int = 10,
+                        label: str = "chunk") -> Comparison:
     """Table of AUROC / accuracy / ECE with 95 % intervals and paired differences to `models[0]`."""
     if not models:
         raise InputError("no predictors to compare")
@@ -52,17 +59,18 @@ def compare_predictions(predictions: pd.DataFrame, models: list[str], n_resample
             row[f"{key}_lo"], row[f"{key}_hi"] = (float(v) for v in np.percentile(diff, [2.5, 97.5]))
             row[f"{key}_p"] = float(np.mean(diff <= 0))  # share of resamples where the reference is not better
         rows.append(row)
-    return Comparison(pd.DataFrame(rows), predictions, reference, n_resamples, n_bins)
+    return Comparison(pd.DataFrame(rows), predictions, reference, n_resamples, n_bins, label)
 
 
-def predict_all(checkpoints: dict[str, Path], dataset_dir: str | Path) -> pd.DataFrame:
-    """Every checkpoint's P(spill) on every chunk of `dataset_dir`, side by side (checks they align)."""
+def predict_all(checkpoints: dict[str, Path], dataset_dir: str | Path, label: str = "chunk") -> pd.DataFrame:
+    """Every checkpoint's P(spill) on every chunk of `dataset_dir`, side by side (checks they align),
+    with each chunk's `label` of the kind named ("chunk" or "horizon"), whatever each model trained on."""
     from grits_lab.spillage.predictor_checkpoint import load_predictor
     from grits_lab.spillage.predictor_training import predict_chunks
 
     merged: pd.DataFrame | None = None
     for name, path in checkpoints.items():
-        frame, _ = predict_chunks(load_predictor(path), dataset_dir)
+        frame, _ = predict_chunks(load_predictor(path), dataset_dir, label=label)
         frame = frame.rename(columns={"p_spill": f"p_{name}"})
         if merged is None:
             merged = frame
@@ -80,7 +88,8 @@ def comparison_markdown(c: Comparison, dataset: str) -> str:
     lines = [
         f"# Spillage predictors on {dataset}",
         "",
-        f"{len(c.predictions)} chunks from {n_eps} episodes, spill rate {c.predictions['label'].mean():.3f}. "
+        f"{len(c.predictions)} chunks from {n_eps} episodes, labelled by the {c.label} label "
+        f"({LABEL_MEANING[c.label]}), spill rate {c.predictions['label'].mean():.3f}. "
         f"95 % intervals from {c.n_resamples} paired bootstrap resamples of whole episodes; "
         f"differences are {ref} minus the row's model (p: share of resamples in which {ref} is not better).",
         "",
@@ -137,7 +146,7 @@ def write_comparison(c: Comparison, dataset: str, out_dir: str | Path) -> list[P
     write_text_atomic(files[0], comparison_markdown(c, dataset))
     write_text_atomic(files[1], c.table.to_csv(index=False))
     models = [{k: v for k, v in row.items() if not (isinstance(v, float) and np.isnan(v))} for row in c.table.to_dict("records")]
-    write_json_atomic(files[2], {"dataset": dataset, "reference": c.reference, "n_resamples": c.n_resamples, "models": models})
+    write_json_atomic(files[2], {"dataset": dataset, "label": c.label, "reference": c.reference, "n_resamples": c.n_resamples, "models": models})
     plot_comparison(c, files[3])
     save_parquet_atomic(files[4], c.predictions)
     return files

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from grits_lab.config import require
+from grits_lab.data.chunk_labels import Label
 
 Encoder = Literal["dp3", "pointnet2"]
 # "trajectory_and_cloud" is GRITS; the other two are the baselines of the evidence.
@@ -102,6 +103,11 @@ class PredictorModelConfig:
 @dataclass
 class PredictorDataConfig:
     dataset: str = "results/datasets/spillage_quick"
+    # What a chunk's label says (docs/predictor.md, "Which label"): "chunk", the paper's, whether the
+    # spilled count rose during the chunk's own n_action_steps actions; "horizon", whether food
+    # spilled from its first action until the load was delivered (needs a dataset collected with
+    # horizon labels: every spillage dataset since they were added; exit.kind carry to see the carry).
+    label: Label = "chunk"
     cloud_source: CloudSource = "composite"
     # Points kept per object: a random subset of the stored N (fresh each training epoch, fixed
     # at evaluation); null keeps all. CPU presets use fewer points than the paper's 3,000.

@@ -21,9 +21,10 @@ import yaml
 from torch.utils.data import DataLoader
 
 from grits_lab.config import config_fingerprint, config_to_dict
+from grits_lab.data.chunk_labels import LABEL_ARRAYS, LABELS
 from grits_lab.data.format import LEGACY_CHUNK_KEY, with_chunk_key
 from grits_lab.data.normalize import ActionNormalizer
-from grits_lab.errors import ConfigError
+from grits_lab.errors import ConfigError, InputError
 from grits_lab.io import ensure_writable_dir, exclusive_directory, write_json_atomic, write_text_atomic
 from grits_lab.seeding import derive_seed
 from grits_lab.spillage.predictor_checkpoint import TrainedPredictor, read_checkpoint, save_predictor
@@ -44,6 +45,8 @@ def _resume_fingerprints(config: PredictorConfig) -> tuple[str, str]:
     and the same with `model.n_action_steps` under its old name, which earlier checkpoints carry."""
     described = config_to_dict(config)
     del described["train"]["epochs"]
+    if described["data"]["label"] == "chunk":  # the only label before the key existed: those runs still resume
+        del described["data"]["label"]
     legacy = {**described, "model": with_chunk_key(described["model"], LEGACY_CHUNK_KEY)}
     return config_fingerprint(described), config_fingerprint(legacy)
 
@@ -71,7 +74,7 @@ def predict(model: SpillagePredictor, dataset: SpillageChunkDataset, batch_size:
 def train_predictor(config: PredictorConfig, restart: bool = False, progress: bool = True) -> dict[str, Any]:
     """Train (or resume) the run of `config`; returns the best epoch's validation metrics and paths."""
     torch.set_num_threads(config.train.num_threads)
-    index = check_spillage_dataset(Path(config.data.dataset), config.model.n_action_steps)
+    index = check_spillage_dataset(Path(config.data.dataset), config.model.n_action_steps, label=config.data.label)
     out = ensure_writable_dir(run_dir(config))
     with exclusive_directory(out, "train predictor"):  # one trainer per run: two would overwrite each other's last.pt
         return _train_in(out, config, index, restart, progress)
@@ -105,7 +108,7 @@ def _train_in(out: Path, config: PredictorConfig, index: Any, restart: bool, pro
         action_norm, cloud_norm = fit_normalizers(dataset_dir, split.train, cloud_key, config.data.cloud_scale)
     write_text_atomic(out / "config.yaml", yaml.safe_dump(config_to_dict(config), sort_keys=False))
 
-    common = dict(cloud_key=cloud_key, n_action_steps=config.model.n_action_steps, action_normalizer=action_norm, cloud_normalizer=cloud_norm, points_per_object=config.data.points_per_object, seed=config.train.seed, cache=config.data.cache_episodes)
+    common = dict(cloud_key=cloud_key, n_action_steps=config.model.n_action_steps, action_normalizer=action_norm, cloud_normalizer=cloud_norm, points_per_object=config.data.points_per_object, seed=config.train.seed, cache=config.data.cache_episodes, label_key=LABEL_ARRAYS[config.data.label])
     train_set = SpillageChunkDataset(dataset_dir, split.train, shuffle=True, buffer_size=config.data.shuffle_buffer, **common)
     train_eval_set = SpillageChunkDataset(dataset_dir, split.train, shuffle=False, **common)
     train_eval_set._cache = train_set._cache  # one decoded copy of each training episode
@@ -160,16 +163,28 @@ def _train_in(out: Path, config: PredictorConfig, index: Any, restart: bool, pro
     return {"run_dir": str(out), "best_checkpoint": str(best_path), "last_checkpoint": str(last_path), "best_epoch": best}
 
 
-def predict_chunks(predictor: TrainedPredictor, dataset_dir: str | Path, files: list[str] | None = None) -> tuple[pd.DataFrame, float]:
+def scoring_label(label: str | None, trained_on: str) -> str:
+    """The label to score against: `label`, else the one the predictor trained on; InputError for another name."""
+    chosen = trained_on if label is None else label
+    if chosen not in LABELS:
+        raise InputError(f"--label must be one of {', '.join(LABELS)}. Got {chosen!r}.")
+    return chosen
+
+
+def predict_chunks(predictor: TrainedPredictor, dataset_dir: str | Path, files: list[str] | None = None,
+                   label: str | None = None) -> tuple[pd.DataFrame, float]:
     """P(spill) of a trained predictor for every chunk of a spillage dataset, and the mean cross-entropy.
 
     One row per chunk: `episode` (the episode file, the unit a paired bootstrap resamples),
-    `chunk` (its index within the episode), `label` and `p_spill`. The order and the point
+    `chunk` (its index within the episode), `label` (of the kind `label` names: "chunk" or
+    "horizon"; default the one the predictor trained on) and `p_spill`. The order and the point
     subsets are fixed by the predictor's seed, so two calls give the same frame.
     """
     dataset_dir = Path(dataset_dir)
     cfg = predictor.config
-    index = check_spillage_dataset(dataset_dir, cfg.model.n_action_steps, key="the predictor's model.n_action_steps")
+    label = scoring_label(label, cfg.data.label)
+    index = check_spillage_dataset(dataset_dir, cfg.model.n_action_steps, key="the predictor's model.n_action_steps",
+                                   label=label, label_key="--label")
     dataset = SpillageChunkDataset(
         dataset_dir,
         sorted(index["file"].tolist()) if files is None else list(files),
@@ -181,6 +196,7 @@ def predict_chunks(predictor: TrainedPredictor, dataset_dir: str | Path, files: 
         shuffle=False,
         seed=cfg.train.seed,
         cache=False,
+        label_key=LABEL_ARRAYS[label],
     )
     p, y, loss = predict(predictor.model, dataset)
     episodes = pd.Series(dataset.sample_episodes(), dtype=str)
@@ -193,7 +209,11 @@ def predict_chunks(predictor: TrainedPredictor, dataset_dir: str | Path, files: 
     return frame, loss
 
 
-def evaluate_predictor(predictor: TrainedPredictor, dataset_dir: str | Path, files: list[str] | None = None, n_bins: int = 10) -> dict[str, Any]:
-    """Accuracy, AUROC, ECE and loss of a trained predictor on every chunk of a (held-out) spillage dataset."""
-    frame, loss = predict_chunks(predictor, dataset_dir, files)
-    return {"dataset": str(dataset_dir), "loss": loss, **classification_report(frame["p_spill"].to_numpy(), frame["label"].to_numpy(), n_bins)}
+def evaluate_predictor(predictor: TrainedPredictor, dataset_dir: str | Path, files: list[str] | None = None, n_bins: int = 10,
+                       label: str | None = None) -> dict[str, Any]:
+    """Accuracy, AUROC, ECE and loss of a trained predictor on every chunk of a (held-out) spillage
+    dataset, against `label` (default: the one it trained on)."""
+    label = scoring_label(label, predictor.config.data.label)
+    frame, loss = predict_chunks(predictor, dataset_dir, files, label)
+    return {"dataset": str(dataset_dir), "label": label, "trained_on": predictor.config.data.label, "loss": loss,
+            **classification_report(frame["p_spill"].to_numpy(), frame["label"].to_numpy(), n_bins)}

@@ -15,9 +15,12 @@ from grits_lab.sim.foods import SHAPES
 BOWL_CENTRE = np.array([0.5, 0.0, 0.05])
 
 
-def write_tiny_spillage_dataset(root: Path, n_episodes: int = 12, n_points: int = 48, n_chunks: int = 3, seed: int = 0, n_action_steps: int = 12) -> Path:
+def write_tiny_spillage_dataset(root: Path, n_episodes: int = 12, n_points: int = 48, n_chunks: int = 3, seed: int = 0, n_action_steps: int = 12,
+                                horizon: bool = False) -> Path:
     """Episodes whose chunk label depends on trajectory and cloud together: a chunk spills when
-    the spoon dips deeper than 1.5 cm below the top of the food pile."""
+    the spoon dips deeper than 1.5 cm below the top of the food pile. With `horizon`, also the
+    horizon labels: every third episode sheds its load in a carry after the last chunk, so all its
+    chunks are horizon-positive; otherwise a chunk is horizon-positive when it or a later one spilled."""
     rng = np.random.default_rng(seed)
     root.mkdir(parents=True, exist_ok=True)
     (root / MANIFEST_FILE).write_text(yaml.safe_dump({"format_version": 1, "kind": "spillage"}))
@@ -40,12 +43,13 @@ def write_tiny_spillage_dataset(root: Path, n_episodes: int = 12, n_points: int 
             clouds.append(np.stack([food, spoon, bowl]))
         cloud = np.asarray(clouds, dtype=np.float16)
         raw = (cloud + rng.normal(0, 0.002, cloud.shape)).astype(np.float16)
-        write_episode(
-            root,
-            f"ep_{e:06d}",
-            {"trajectory": trajectory, "chunk_start": starts, "chunk_cloud": cloud, "chunk_cloud_raw": raw, "chunk_spilled": spilled, "spilled_over_time": np.cumsum(np.repeat(spilled, n_action_steps)[:t]).astype(np.int32)},
-            {"shape": SHAPES[e % 4], "seed": seed * 1000 + e, "label": int(spilled.any()), "split": "train"},
-        )
+        arrays = {"trajectory": trajectory, "chunk_start": starts, "chunk_cloud": cloud, "chunk_cloud_raw": raw, "chunk_spilled": spilled, "spilled_over_time": np.cumsum(np.repeat(spilled, n_action_steps)[:t]).astype(np.int32)}
+        meta = {"shape": SHAPES[e % 4], "seed": seed * 1000 + e, "label": int(spilled.any()), "split": "train"}
+        if horizon:
+            later = np.logical_or.accumulate(spilled[::-1])[::-1]
+            arrays["chunk_spilled_horizon"] = later | (e % 3 == 0)
+            meta["label_horizon"] = int(arrays["chunk_spilled_horizon"].any())
+        write_episode(root, f"ep_{e:06d}", arrays, meta)
     rebuild_index(root)
     return root
 
@@ -53,3 +57,9 @@ def write_tiny_spillage_dataset(root: Path, n_episodes: int = 12, n_points: int 
 @pytest.fixture(scope="session")
 def tiny_dataset(tmp_path_factory) -> Path:
     return write_tiny_spillage_dataset(tmp_path_factory.mktemp("spill") / "tiny")
+
+
+@pytest.fixture(scope="session")
+def tiny_horizon_dataset(tmp_path_factory) -> Path:
+    """As `tiny_dataset`, with horizon labels (chunk_spilled_horizon, label_horizon)."""
+    return write_tiny_spillage_dataset(tmp_path_factory.mktemp("spill") / "tiny_horizon", horizon=True)

@@ -143,7 +143,7 @@ def test_a_checkpoint_saved_before_the_chunk_length_took_the_policys_name_loads_
     model = payload["config"]["model"]
     model["chunk_len"] = model.pop("n_action_steps")
     described = config_to_dict(cfg)  # what such a checkpoint's resume fingerprint hashed
-    del described["train"]["epochs"]
+    del described["train"]["epochs"], described["data"]["label"]  # it also predates `data.label`
     described["model"]["chunk_len"] = described["model"].pop("n_action_steps")
     payload["fingerprint"] = config_fingerprint(described)
     save_checkpoint(last, payload)
@@ -225,3 +225,69 @@ def test_a_second_trainer_of_one_run_is_refused_naming_the_first(tmp_path, tiny_
     with pytest.raises(StorageError, match=rf"is being written by `grits-lab train predictor` \(pid {holder.pid} on"):
         train_predictor(_config(tmp_path, tiny_dataset, epochs=1), progress=False)
     assert [p.name for p in run.iterdir()] == [".grits-lab.lock"]
+
+
+def test_a_predictor_with_label_horizon_trains_and_scores_on_the_horizon_array(tmp_path, tiny_horizon_dataset):
+    from grits_lab.data.format import list_episode_files, read_episode
+    from grits_lab.spillage.predictor_training import predict_chunks
+
+    cfg = _config(tmp_path, tiny_horizon_dataset, epochs=1)
+    cfg.data.label = "horizon"
+    train_predictor(cfg, progress=False)
+    predictor = load_predictor(tmp_path / "runs" / "tiny" / "last.pt")
+    assert predictor.config.data.label == "horizon"
+    episodes = {p.name: read_episode(p)[0] for p in list_episode_files(tiny_horizon_dataset)}
+    horizon = np.concatenate([episodes[name]["chunk_spilled_horizon"] for name in sorted(episodes)])
+    chunk = np.concatenate([episodes[name]["chunk_spilled"] for name in sorted(episodes)])
+    assert (horizon != chunk).any()  # the two labels differ on this set, so the test tells them apart
+    frame, _ = predict_chunks(predictor, tiny_horizon_dataset)  # default: the label it trained on
+    np.testing.assert_array_equal(frame["label"].to_numpy().astype(bool), horizon)
+    frame, _ = predict_chunks(predictor, tiny_horizon_dataset, label="chunk")  # either label can be scored
+    np.testing.assert_array_equal(frame["label"].to_numpy().astype(bool), chunk)
+    report = evaluate_predictor(predictor, tiny_horizon_dataset)
+    assert (report["label"], report["trained_on"]) == ("horizon", "horizon")
+    history = json.loads((tmp_path / "runs" / "tiny" / "history.json").read_text())
+    assert history[0]["train_accuracy"] >= 0  # one epoch ran on the horizon labels
+
+
+def test_label_errors_name_the_key(tmp_path, tiny_dataset):
+    with pytest.raises(ConfigError, match=r"`data.label` must be one of 'chunk', 'horizon'. Got 'future'"):
+        config_from_dict(PredictorConfig, {"data": {"label": "future"}})
+    cfg = _config(tmp_path, tiny_dataset, epochs=1)
+    cfg.data.label = "horizon"  # a dataset made before horizon labels
+    with pytest.raises(ConfigError, match=r"`data.label` is horizon, but the spillage dataset .* without chunk_spilled_horizon"):
+        train_predictor(cfg, progress=False)
+    assert not (tmp_path / "runs").exists()
+
+
+def test_a_chunk_label_run_keeps_the_resume_fingerprint_of_runs_made_before_the_label_key(tmp_path, tiny_dataset):
+    from grits_lab.config import config_fingerprint
+    from grits_lab.spillage.predictor_training import _resume_fingerprints
+
+    cfg = _config(tmp_path, tiny_dataset)
+    before = config_to_dict(cfg)
+    del before["train"]["epochs"], before["data"]["label"]
+    assert _resume_fingerprints(cfg)[0] == config_fingerprint(before)
+    cfg.data.label = "horizon"
+    assert _resume_fingerprints(cfg)[0] != config_fingerprint(before)
+
+
+def test_cli_scores_either_label_and_compare_needs_one_when_predictors_differ(tmp_path, tiny_horizon_dataset, capsys):
+    paths = []
+    for name, label in (("h", "horizon"), ("c", "chunk")):
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(yaml.safe_dump({
+            "name": name, "output_dir": str(tmp_path / "runs"), "model": {"dp3": {"hidden_dims": [16], "out_dim": 16}},
+            "data": {"dataset": str(tiny_horizon_dataset), "label": label}, "train": {"epochs": 1, "batch_size": 16, "num_threads": 1},
+        }))
+        assert main(["train", "predictor", str(path), "--no-progress"]) == 0
+        paths.append(str(path))
+    assert main(["train", "predictor", paths[1], "--eval", str(tiny_horizon_dataset), "--label", "horizon"]) == 0
+    scored = json.loads((tmp_path / "runs" / "c" / "eval_tiny_horizon_horizon.json").read_text())
+    assert (scored["label"], scored["trained_on"]) == ("horizon", "chunk")
+    capsys.readouterr()
+    assert main(["compare-predictors", *paths, "--eval", str(tiny_horizon_dataset), "--bootstrap", "100"]) == 2
+    assert "--label" in capsys.readouterr().err
+    assert main(["compare-predictors", *paths, "--eval", str(tiny_horizon_dataset), "--bootstrap", "100", "--label", "horizon"]) == 0
+    table = json.loads((tmp_path / "runs" / "comparison_tiny_horizon_horizon" / "predictor_comparison.json").read_text())
+    assert table["label"] == "horizon" and [m["model"] for m in table["models"]] == ["h", "c"]
