@@ -197,12 +197,18 @@ def _holder_text(holder: dict[str, Any]) -> str:
 
 def _is_dead_here(holder: dict[str, Any]) -> bool:
     """True when the holder is a process of this host that no longer runs."""
-    if holder.get("host") != socket.gethostname():
-        return False
     try:
-        os.kill(int(holder.get("pid", -1)), 0)
-    except ProcessLookupError:
-        return True
-    except (OSError, ValueError):
+        return holder.get("host") == socket.gethostname() and not pid_alive(int(holder.get("pid", -1)))
+    except (TypeError, ValueError):
         return False
-    return False
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether process `pid` of this host still runs (one of another user counts as running)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # PermissionError: it exists; EINVAL and the like: do not call it gone
+        return True
+    return True

@@ -28,7 +28,7 @@ from optuna.study import StudyDirection
 from optuna.trial import FrozenTrial, TrialState
 
 from grits_lab.errors import ConfigError, GritsError
-from grits_lab.io import save_parquet_atomic
+from grits_lab.io import pid_alive, save_parquet_atomic
 from grits_lab.tune.study_config import StudyConfig
 from grits_lab.tune.objective import EpisodeEvaluator, check_records, objective_values, summarize_records
 from grits_lab.tune.sampler import build_sampler
@@ -132,7 +132,7 @@ def stale_reason(trial: FrozenTrial, me: WorkerIdentity, stale_after_s: float, n
     """Why a RUNNING trial is taken as abandoned, or None while its worker may still be alive."""
     worker = WorkerIdentity.decode(trial.user_attrs.get(WORKER_ATTR, ""))
     if worker is not None and worker.host == me.host and worker.token != me.token:
-        if worker.pid == me.pid or not _pid_alive(worker.pid):
+        if worker.pid == me.pid or not pid_alive(worker.pid):
             return f"worker process {worker.pid} on {worker.host} is gone"
     last = trial.user_attrs.get(HEARTBEAT_ATTR)
     if last is None and trial.datetime_start is not None:
@@ -140,16 +140,6 @@ def stale_reason(trial: FrozenTrial, me: WorkerIdentity, stale_after_s: float, n
     if last is not None and now - float(last) > stale_after_s:
         return f"no heartbeat for {now - float(last):.0f} s"
     return None
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def recover_stale_trials(study: optuna.Study, storage: BaseStorage, stale_after_s: float,
