@@ -5,8 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import yaml
-
+from grits_lab.config import parse_yaml
 from grits_lab.data.chunk_labels import TRIAL_LABELS
 from grits_lab.data.format import EPISODE_DIR, MANIFEST_FILE, load_index, rebuild_index
 from grits_lab.errors import StorageError
@@ -19,7 +18,7 @@ def dataset_summary(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     if not (path / MANIFEST_FILE).is_file():
         raise StorageError(f"not a grits-lab dataset (no {MANIFEST_FILE}): {path}")
-    manifest = yaml.safe_load((path / MANIFEST_FILE).read_text()) or {}
+    manifest = parse_yaml((path / MANIFEST_FILE).read_text(), path / MANIFEST_FILE) or {}
     n_files = len(list((path / EPISODE_DIR).glob("*.npz")))
     index = load_index(path)
     if len(index) != n_files:
