@@ -23,8 +23,10 @@ from grits_lab.config import load_yaml, merge_mappings
 from grits_lab.io import ensure_writable_dir, exclusive_directory, write_json_atomic, write_text_atomic
 from grits_lab.pipeline.pipeline_config import UPSTREAM, PipelineConfig
 from grits_lab.pipeline.stages import Layout, check, run, wire
+from grits_lab.runners.executor_config import ExecutorConfig, check_reachable, cluster_address
 
 STATE_FILE = "pipeline_state.json"
+RAY_STAGES = ("demos", "spillage", "evaluate", "sweep")  # the stages that run episodes on Ray
 
 
 def stage_config_text(stage: str, config: PipelineConfig, layout: Layout) -> str:
@@ -65,6 +67,9 @@ def run_pipeline(config: PipelineConfig, only: list[str] | None = None, force: l
     for stage in stages:  # a typo in the last stage's overrides fails now, not after the stages before it
         if not only or stage in only:
             check(stage, texts, config.stages[stage].config)
+    if any(stage.split("_")[0] in RAY_STAGES for stage in stages if not only or stage in only):
+        # a cluster that does not answer, or refuses this client's token, fails before any directory
+        check_reachable(cluster_address(ExecutorConfig(address=config.address)))
     ensure_writable_dir(layout.root)
     with exclusive_directory(layout.root, "pipeline"):  # one pipeline per output directory: two would race on its state
         return _run_stages(config, layout, stages, texts, only, force, progress)

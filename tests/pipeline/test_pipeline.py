@@ -132,3 +132,17 @@ def test_the_shipped_pipelines_stage_configs_pass_the_check(tmp_path):
         texts = {stage: stage_config_text(stage, config, Layout(tmp_path / "out")) for stage in config.ordered_stages()}
         for stage in texts:
             check(stage, texts, config.stages[stage].config)
+
+
+def test_a_cluster_address_where_nothing_answers_fails_before_the_pipeline_directory_exists(tmp_path, demos_file, capsys):
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]  # closed again: nothing listens there
+    out = tmp_path / "run"
+    pipeline = _write(tmp_path / "pipeline.yaml", {"name": "tiny", "output_dir": str(out), "address": f"127.0.0.1:{port}",
+                                                   "stages": {"demos": {"config": str(demos_file)}}})
+    assert main(["pipeline", str(pipeline), "--no-progress"]) == 2
+    assert f"cannot connect to the Ray cluster at 127.0.0.1:{port}" in capsys.readouterr().err
+    assert not out.exists()
