@@ -2,11 +2,11 @@
 
 NOT GRITS AND NOT SIMULATION. It exists so that the sweep machinery (storage, resumption,
 several workers, outputs) can be exercised in seconds. Its records are labelled
-`method = "synthetic"`. The response surface mimics the trade-off the paper reports: stronger
-guidance (larger rho, more guided denoising steps) lowers spillage but, pushed too far, raises
-scoop failures. Each episode draws its outcomes from its own seed, with the same random numbers
-for every (rho, s): trials are compared on common random numbers, as real trials are compared
-on the same episodes.
+`method = "synthetic"` and `protocol = "synthetic"`. The response surface mimics the trade-off
+the paper reports: stronger guidance (larger rho, more guided denoising steps) lowers spillage
+but, pushed too far, raises scoop failures. Each episode draws its outcomes from its own seed,
+with the same random numbers for every (rho, s): trials are compared on common random numbers,
+as real trials are compared on the same episodes.
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ class SyntheticEvaluator:
             spilled = 1 + int(u[2] * 20) if spill else 0
             scooped = 0 if fail else 20 + int(u[3] * 30)
             rows.append({
-                "run_id": run_id, "method": "synthetic", "food": ep.food, "split": "train",
+                "run_id": run_id, "protocol": "synthetic", "method": "synthetic", "food": ep.food, "split": "train",
                 "level": ep.level, "trial": ep.trial, "seed": ep.seed,
                 "task_success": not spill and not fail, "spillage": spill, "scoop_failure": fail,
                 "scoop_success": not fail, "spilled_before_scoop": spill and u[2] < 0.7,
