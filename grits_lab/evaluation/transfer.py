@@ -132,7 +132,7 @@ def path_is_clear(path: np.ndarray, obstacles: list[Obstacle], spoon_reach: floa
 def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], clearance: float,
                   pour_height: float, max_step: float, spoon_reach: float, level_steps: int = 1,
                   target_heading: float | None = None, level_yaw_offset: float = 0.0, pour_offset: float = 0.0,
-                  profile: str = "constant") -> np.ndarray:
+                  profile: str = "constant", lip_offset: float = 0.0) -> np.ndarray:
     """(T, 9) spoon path: up to a safe height while levelling over `level_steps` actions, across, down to
     `pour_height` above the target's rim (negative: into the bowl), level from the end of the lift on.
     The first `lift_length(path)` actions are the lift (they rise straight up); the rest the carry.
@@ -140,7 +140,10 @@ def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
     level_yaw_offset: radians the level spoon's heading is turned from the scoop's during the lift;
     pour_offset: metres the pour point moves from the target's centre away from the robot's base
     (at the world origin), which the arm reaches more easily for bowls close to it; profile: each
-    straight segment's time-parameterization (`_line`). InputError when the path would cross an obstacle.
+    straight segment's time-parameterization (`_line`); lip_offset: metres the spoon's centre is
+    moved along its own +y axis at the pour, so that its -y lip, the one `pour_motion` lowers and
+    the food leaves by, pours over the target's centre instead of 2-3 cm from it. InputError when
+    the path would cross an obstacle.
     """
     rotation = level_rotation(current)
     if level_yaw_offset:
@@ -150,12 +153,14 @@ def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
     centre = np.asarray(target.centre[:2], dtype=np.float64)
     if pour_offset:
         centre = centre + pour_offset * centre / max(float(np.linalg.norm(centre)), 1e-9)
+    arrival = rotation if target_heading is None else heading_rotation(target_heading)
+    if lip_offset:
+        centre = centre + lip_offset * arrival[:2, 1]
     above_target = np.array([centre[0], centre[1], safe_z])
     pour_point = np.array([centre[0], centre[1], target.rim_height + pour_height])
     tipped = rot6d_to_matrix(np.asarray(current[3:9], dtype=np.float64))
     waypoints = _line(start, np.array([start[0], start[1], safe_z]), tipped, max_step, rotation, level_steps, profile)
     lifted = len(waypoints) - 1  # the vertical lift leaves the source bowl by design
-    arrival = rotation if target_heading is None else heading_rotation(target_heading)
     waypoints += _line(waypoints[-1][:3].astype(np.float64), above_target, rotation, max_step, arrival, profile=profile)
     waypoints += _line(above_target, pour_point, arrival, max_step, profile=profile)
     path = np.stack(waypoints)
@@ -169,7 +174,8 @@ def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
 
 def pour_motion(pose: np.ndarray, angle_deg: float, steps: int, profile: str = "constant") -> np.ndarray:
     """(steps, 9) roll the spoon about its own x axis by `angle_deg`, in place, in `steps` actions
-    (profile: "constant" equal increments, "min_jerk" from rest to rest, `min_jerk`)."""
+    (profile: "constant" equal increments, "min_jerk" from rest to rest, `min_jerk`). A positive
+    angle raises the spoon's +y side: the food leaves over its -y lip."""
     rot = rot6d_to_matrix(np.asarray(pose[3:9], dtype=np.float64))
     fractions = min_jerk(steps) if profile == "min_jerk" else np.arange(1, steps + 1) / steps
     out = []
@@ -273,11 +279,12 @@ def transfer_options(settings: Any) -> list[TransferOption]:
 
 
 def option_motion(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], settings: Any, max_step: float,
-                  spoon_reach: float, target_heading: float | None, option: TransferOption) -> tuple[np.ndarray, list[str]]:
+                  spoon_reach: float, target_heading: float | None, option: TransferOption,
+                  lip_offset: float = 0.0) -> tuple[np.ndarray, list[str]]:
     """The actions (T, 9) of one option, lift to pour, and each action's stage."""
     path = plan_transfer(current, target, obstacles, settings.clearance, option.pour_height, max_step, spoon_reach,
                          option.level_steps, target_heading, math.radians(option.level_yaw_deg), option.pour_offset,
-                         settings.profile)
+                         settings.profile, lip_offset)
     pour = pour_motion(path[-1], settings.pour_angle_deg, settings.pour_steps, settings.profile)
     lift = lift_length(path)
     stages = ["lift"] * lift + ["carry"] * (len(path) - lift) + ["pour"] * len(pour)
@@ -286,7 +293,7 @@ def option_motion(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
 
 def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], settings: Any, max_step: float,
                     spoon_reach: float, target_heading: float | None,
-                    check: Callable[[np.ndarray], Any] | None) -> TransferPlan:
+                    check: Callable[[np.ndarray], Any] | None, lip_offset: float = 0.0) -> TransferPlan:
     """Plan the transfer and pour, checked for reach (and slowed to the Panda's joint limits) when
     `check` is given.
 
@@ -306,7 +313,8 @@ def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[O
     for option in transfer_options(settings):
         if failed_lift == (option.level_steps, option.level_yaw_deg):
             continue
-        actions, stages = option_motion(current, target, obstacles, settings, max_step, spoon_reach, target_heading, option)
+        actions, stages = option_motion(current, target, obstacles, settings, max_step, spoon_reach, target_heading, option,
+                                        lip_offset)
         if check is None:
             return TransferPlan(actions, stages, option, reachable=True, n_checks=0)
         n_checks += 1

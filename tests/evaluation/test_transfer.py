@@ -102,7 +102,7 @@ def test_transfer_options_start_with_the_configured_one_and_never_repeat():
     assert options[0] == TransferOption(10, 0.0, 0.01, 0.0)
     assert options[1] == TransferOption(10, 0.0, 0.01, 0.03)  # the pour alternatives of a lift come before the next lift
     assert len(options) == len(set(options)) == 2 * 5 * 3 * 3  # level steps x headings x pour heights x offsets
-    assert transfer_options(TransferSettings(alternative_level_steps=[10], alternative_level_yaw_deg=[0.0],
+    assert transfer_options(TransferSettings(alternative_level_steps=[10], alternative_level_yaw_deg=[0.0], pour_height=0.01,
                                              alternative_pour_heights=[0.01], alternative_pour_offsets=[0.0])) == options[:1]
 
 
@@ -219,3 +219,22 @@ def test_without_a_passing_option_the_smallest_joint_step_is_taken():
 
     plan = choose_transfer(start, target, [], settings, 0.012, 0.036, None, check)
     assert (plan.option.level_yaw_deg, plan.reachable, plan.n_checks) == (-60.0, False, 2)
+
+
+def test_the_pour_puts_the_lip_the_food_leaves_by_over_the_targets_centre():
+    from grits_lab.evaluation.transfer import BowlEstimate, heading_rotation, plan_transfer, pour_motion
+    from grits_lab.geometry import rot6d_to_matrix
+
+    start = np.array([0.6, -0.1, 0.12, 1, 0, 0, 0, 1, 0], dtype=np.float32)
+    target = BowlEstimate(np.array([0.45, 0.3, 0.0]), 0.058, 0.045, 100, 0.0)
+    heading = float(np.arctan2(0.3, 0.45))
+    path = plan_transfer(start, target, [], 0.04, 0.005, 0.012, 0.036, target_heading=heading, profile="min_jerk", lip_offset=0.026)
+    # The spoon's centre sits 2.6 cm along its own +y axis from the target's centre ...
+    y_axis = heading_rotation(heading)[:, 1]
+    np.testing.assert_allclose(path[-1, :2], target.centre[:2] + 0.026 * y_axis[:2], atol=1e-6)
+    # ... and the roll lowers its -y lip, which then passes over the target's centre.
+    pour = pour_motion(path[-1], 120.0, 30, "min_jerk")
+    lip_local = np.array([0.0, -0.026, 0.01])
+    lips = np.array([p[:3] + rot6d_to_matrix(p[3:9].astype(np.float64)) @ lip_local for p in pour])
+    assert lips[-1, 2] < target.rim_height - 0.015  # well inside the bowl at the end of the roll
+    assert np.linalg.norm(lips[len(lips) // 2, :2] - target.centre[:2]) < 0.01  # mid-roll, over the centre
