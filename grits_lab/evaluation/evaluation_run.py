@@ -308,7 +308,8 @@ def _evaluate_in(out: Path, config: EvaluationConfig, specs: list[EpisodeSpec], 
 
 
 def evaluate_guidance(config: EvaluationConfig, keys: list[EpisodeKey], rho: float, s: int, method: str = "grits",
-                      run_id: str = "sweep", executor: Executor | None = None, progress: bool = False) -> pd.DataFrame:
+                      run_id: str = "sweep", executor: Executor | None = None, progress: bool = False,
+                      paths: dict[str, str] | None = None, digests: dict[str, str] | None = None) -> pd.DataFrame:
     """The sweep's entry point: `method` of `config` with guidance rho, s (Algorithm 1) on `keys` -> their records.
 
     config: a loaded evaluation config; only its guidance's rho and s and the run id change, so
@@ -316,12 +317,16 @@ def evaluate_guidance(config: EvaluationConfig, keys: list[EpisodeKey], rho: flo
     keys: the episodes, with their own seeds (the sweep derives them from its own root, so no
         tuning episode is a test episode). Returns one record per episode (grits_lab/records.py
         columns). Nothing is written to disk: the sweep stores the returned records itself.
+    executor: the pool to run on, left open (a sweep keeps one for all its trials, so its workers
+        keep their simulators and loaded checkpoints); None: a pool made and closed here.
+    paths, digests: the method's checkpoints ({key: path}) and their digests ({path: digest}) when
+        the caller resolved them once; None: resolved from `config` here.
     Raises InputError for an unknown method.
     """
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; methods: {', '.join(METHODS)}")
     config = replace(config, run_id=run_id, guidance=replace(config.guidance, rho=float(rho), s=int(s)))
-    specs = build_specs(config, keys, methods=[method])
+    specs = build_specs(config, keys, methods=[method], paths=None if paths is None else {method: paths}, digests=digests)
     own = executor is None
     executor = executor or make_executor(config.executor)
     try:

@@ -7,6 +7,13 @@ and each trial runs `grits_lab.evaluation.evaluation_run.evaluate_guidance` with
 evaluation record per episode (columns of grits_lab/records.py). Running GRITS goes through
 `GritsEvaluator`; besides it, grits_lab.tune reads only the episode grid and the evaluation
 config's food library from the evaluation layer.
+
+One pool per sweep process: the evaluator makes the evaluation config's executor (a Ray pool) at
+its first trial and hands it to every trial after, so each worker builds its simulator and loads
+the checkpoints once (the runner's `WorkerContext` keeps them) instead of once per trial; the
+checkpoint files are resolved and hashed once too. `close` (the sweep calls it at the end, on
+Ctrl-C and on errors) shuts the pool down; a trial that raises closes it as well, so no episode
+of a broken trial is left in flight for the next one, which starts a fresh pool.
 """
 
 from __future__ import annotations
@@ -18,7 +25,8 @@ import pandas as pd
 from grits_lab.errors import ConfigError, InputError
 from grits_lab.evaluation.evaluation_config import EvaluationConfig, load_evaluation_config
 from grits_lab.evaluation.methods import METHODS, check_method_checkpoints, method_checkpoints
-from grits_lab.evaluation.evaluation_run import evaluate_guidance
+from grits_lab.evaluation.evaluation_run import checkpoint_digests, evaluate_guidance
+from grits_lab.runners import Executor, make_executor
 from grits_lab.runners.executor_config import check_reachable, cluster_address
 from grits_lab.tune.study_config import StudyConfig
 
@@ -38,12 +46,25 @@ class GritsEvaluator:
         self._evaluation = load_evaluation_config(ref.config, ref.overrides)
         _check_against_evaluation(self._evaluation, ref.method)
         self._method = ref.method
+        self._paths = method_checkpoints(ref.method, self._evaluation.checkpoints)
+        self._digests = checkpoint_digests({ref.method: self._paths})
+        self._executor: Executor | None = None
 
     def __call__(self, rho: float, s: int, run_id: str) -> pd.DataFrame:
-        return evaluate_guidance(self._evaluation, self._keys, rho=rho, s=s, method=self._method, run_id=run_id)
+        if self._executor is None:
+            self._executor = make_executor(self._evaluation.executor)
+        try:
+            return evaluate_guidance(self._evaluation, self._keys, rho=rho, s=s, method=self._method, run_id=run_id,
+                                     executor=self._executor, paths=self._paths, digests=self._digests)
+        except BaseException:
+            self.close()  # episodes of this trial may still be in flight: the next trial gets a fresh pool
+            raise
 
     def close(self) -> None:
-        pass
+        """Shut the pool down (idempotent)."""
+        executor, self._executor = self._executor, None
+        if executor is not None:
+            executor.close()
 
 
 def _check_against_evaluation(evaluation: EvaluationConfig, method: str) -> None:
