@@ -31,13 +31,17 @@ import torch
 from grits_lab.config import config_from_dict, load_yaml
 
 
-def _policy(preset: str):
+def _policy(preset: str, unet: dict | None = None):
+    """A freshly initialised policy of the preset (`unet`: keys replacing the preset's U-Net settings)."""
     from grits_lab.policies.diffusion import DiffusionPolicy, DiffusionPolicyConfig
     from grits_lab.sim import SimConfig
     from grits_lab.sim.env import scene_geometry
     from grits_lab.sim.expert import expert_trajectory
 
-    cfg = config_from_dict(DiffusionPolicyConfig, load_yaml(f"experiments/policy_{preset}.yaml")["policy"], "policy")
+    data = load_yaml(f"experiments/policy_{preset}.yaml")["policy"]
+    if unet:
+        data = {**data, "unet": {**data.get("unet", {}), **unet}}
+    cfg = config_from_dict(DiffusionPolicyConfig, data, "policy")
     torch.manual_seed(0)
     policy = DiffusionPolicy(cfg).eval()
     sim = SimConfig()
@@ -114,18 +118,25 @@ def bench_latency(preset: str, repeats: int) -> dict[str, object]:
     }
 
 
-def bench_throughput(episodes: int, workers: int) -> dict[str, object]:
-    from grits_lab.evaluation.evaluation_config import EvaluationConfig
-    from grits_lab.evaluation.evaluation_run import evaluate
+def write_cpu_checkpoints(folder: Path, unet: dict | None = None) -> tuple[Path, Path]:
+    """Freshly initialised cpu-preset policy and predictor checkpoints in `folder`: (policy.pt, predictor.pt)."""
     from grits_lab.spillage import save_predictor
     from grits_lab.training import save_checkpoint
 
-    tmp = Path(tempfile.mkdtemp(prefix="bench-eval-"))
-    policy, bowl, actions = _policy("cpu")
-    save_checkpoint(tmp / "policy.pt", {"policy": policy.policy_state()})
+    policy, bowl, actions = _policy("cpu", unet)
+    save_checkpoint(folder / "policy.pt", {"policy": policy.policy_state()})
     predictor, pcfg = _predictor("cpu", actions, bowl)
-    save_predictor(tmp / "predictor.pt", config=pcfg, model=predictor.model, action_normalizer=predictor.action_normalizer,
-                    cloud_normalizer=predictor.cloud_normalizer)
+    save_predictor(folder / "predictor.pt", config=pcfg, model=predictor.model, action_normalizer=predictor.action_normalizer,
+                   cloud_normalizer=predictor.cloud_normalizer)
+    return folder / "policy.pt", folder / "predictor.pt"
+
+
+def bench_throughput(episodes: int, workers: int) -> dict[str, object]:
+    from grits_lab.evaluation.evaluation_config import EvaluationConfig
+    from grits_lab.evaluation.evaluation_run import evaluate
+
+    tmp = Path(tempfile.mkdtemp(prefix="bench-eval-"))
+    write_cpu_checkpoints(tmp)
     config = config_from_dict(EvaluationConfig, {
         "run_id": "bench", "output_dir": str(tmp / "run"), "methods": ["dp", "grits"], "foods": ["chocolate_balls"], "levels": ["low"],
         "trials": episodes, "checkpoints": {"policy": str(tmp / "policy.pt"), "predictor": str(tmp / "predictor.pt")},
