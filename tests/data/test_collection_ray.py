@@ -33,7 +33,7 @@ def ray_session():
 def test_serial_and_ray_give_identical_simulated_records():
     config = config_from_dict(SpillageConfig, {
         "kind": "spillage", "episodes": 4, "shapes": ["sphere", "cube"], "particles": {"fill_height": [0.005, 0.008]},
-        "cloud": {"n_points": 128, "cad_surface_samples": 1000}, "sim": {"cameras": CAMERAS},
+        "cloud": {"n_points": 128, "cad_surface_samples": 1000}, "sim": {"cameras": CAMERAS}, "exit": {"kind": "exit"},
     })
     base = base_trajectory(config)[:30]
     bowl = source_bowl_region(config)
@@ -54,7 +54,7 @@ def test_serial_and_ray_give_identical_simulated_records():
 def test_a_worker_killed_during_collect_loses_and_duplicates_nothing(tmp_path, kill_a_worker_mid_episode):
     data = {
         "kind": "spillage", "episodes": 4, "spill_fraction": 0.0, "shapes": ["sphere", "cube"], "particles": {"fill_height": [0.005, 0.005]},
-        "cloud": {"n_points": 64, "cad_surface_samples": 500}, "sim": {"cameras": CAMERAS}, "exit": {"enabled": False},
+        "cloud": {"n_points": 64, "cad_surface_samples": 500}, "sim": {"cameras": CAMERAS}, "exit": {"kind": "exit", "enabled": False},
         "raw_cloud": False,
     }
     serial = config_from_dict(SpillageConfig, {**data, "output_dir": str(tmp_path / "serial"), "executor": {"backend": "serial"}})
