@@ -79,7 +79,7 @@ def spillage_trial(tmp_path: Path) -> dict[str, Any]:
     config = config_from_dict(SpillageConfig, {
         "kind": "spillage", "output_dir": str(tmp_path / "spill"), "episodes": 1, "shapes": ["sphere"], "seed": SEED,
         "base_trajectory": str(tmp_path / "base.npy"), "particles": {"fill_height": [0.01, 0.01], "radius": [0.004, 0.006]},
-        "cloud": {"n_points": 64, "cad_surface_samples": 400}, "executor": {"backend": "serial"}, "exit": {"enabled": False},
+        "cloud": {"n_points": 64, "cad_surface_samples": 400}, "executor": {"backend": "serial"}, "exit": {"kind": "exit", "enabled": False},
         "sim": {"cameras": [{"name": "front", "eye": [1.05, -0.15, 0.55], "target": [0.5, -0.1, 0.03], "width": 64, "height": 48}]},
     })
     spec = make_trial_spec(config, base_trajectory(config), source_bowl_region(config), "sphere", 0)
@@ -94,8 +94,28 @@ def spillage_trial(tmp_path: Path) -> dict[str, Any]:
     return {"meta": {k: v for k, v in meta.items() if not isinstance(v, (dict, list))}, **labels}
 
 
+def expert_task_episode(tmp_path: Path) -> dict[str, Any]:
+    """The whole task with the scripted expert's scoop (the `expert` method): scoop, lift, carry,
+    pour, and every spilled particle's stage and cause."""
+    from grits_lab.evaluation.controllers import ExpertController
+    from grits_lab.evaluation.evaluation_config import EvaluationConfig
+    from grits_lab.evaluation.task_episode import run_task_episode
+    from grits_lab.perception.env_clouds import builder_for_env
+    from grits_lab.sim import ScoopEnv
+
+    config = EvaluationConfig(methods=["expert"], foods=[FOOD], levels=[LEVEL], trials=1)
+    env = ScoopEnv(config.sim)
+    try:
+        record = run_task_episode(env, ExpertController(), config, seed=SEED, food=FOOD, level=LEVEL,
+                                  builder=builder_for_env(config.cloud, env))
+    finally:
+        env.close()
+    return {k: v for k, v in record.items() if not k.startswith("_") and k != "renders"}
+
+
 GOLDEN: dict[str, Callable[[Path], dict[str, Any]]] = {
     "expert_rollout.json": expert_rollout,
+    "expert_task_episode.json": expert_task_episode,
     "spillage_trial.json": spillage_trial,
 }
 
