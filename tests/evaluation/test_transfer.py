@@ -117,7 +117,7 @@ def test_an_unreachable_pour_is_replaced_by_one_the_arm_reaches(env):
     from grits_lab.sim.env import matrix_to_pose9
 
     scene, target, obstacles = _scene_obstacles(env, (0.30, 0.20))
-    settings = TransferSettings()
+    settings = TransferSettings(alternative_pour_heights=[0.05])  # the pour the arm reaches here: 5 cm up, 3 cm out
     current = matrix_to_pose9(scene.spoon_pose())
     heading = math.atan2(target.centre[1], target.centre[0])
     check = lambda actions: env.check_path(actions, rest_pull=False)  # noqa: E731 (the stages after the scoop)
