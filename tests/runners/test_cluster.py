@@ -222,5 +222,13 @@ def test_a_collection_finishes_when_a_node_is_lost_following_the_readme_steps(tw
             proc.kill()
     assert proc.returncode == 0, err[-3000:]
     assert len(list(episodes.glob("*.npz"))) == 16
-    print(f"killed after {killed_at - started:.1f} s, finished {time.monotonic() - killed_at:.1f} s later")
-    assert "re-running it from its seed" in err and "not replaced (" in err and "continuing with 1 workers" in err, err[-3000:]
+    after_kill = time.monotonic() - killed_at
+    print(f"killed after {killed_at - started:.1f} s, finished {after_kill:.1f} s later")
+    assert "re-running it from its seed" in err, err[-3000:]
+    # The pool gives the lost worker's replacement up after replace_timeout_s (5 s here) and says so;
+    # on a busy machine the live worker may finish the last trials first, and then there is nothing to say.
+    if "not replaced (" in err:
+        assert "continuing with 1 workers" in err, err[-3000:]
+    else:
+        assert after_kill < 5 + 30, err[-3000:]
+    assert after_kill < 120  # bounded: the job never waits on a worker the cluster cannot place
