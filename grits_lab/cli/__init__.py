@@ -20,6 +20,7 @@ from grits_lab.cli import (
     evaluate_commands,
     pipeline_commands,
     report_commands,
+    results_commands,
     sim_commands,
     sweep_commands,
     train_commands,
@@ -27,7 +28,7 @@ from grits_lab.cli import (
 from grits_lab.errors import GritsError
 
 # In the order of the workflow, as `grits-lab --help` and the README list them: the world, data,
-# training, evaluation, tuning, the report, and the pipeline that runs them all.
+# training, evaluation, tuning, the report, the results pages, and the pipeline that runs them all.
 COMMAND_GROUPS = (
     sim_commands,
     data_commands,
@@ -36,6 +37,7 @@ COMMAND_GROUPS = (
     evaluate_commands,
     sweep_commands,
     report_commands,
+    results_commands,
     pipeline_commands,
 )
 

@@ -1,4 +1,4 @@
-"""`grits-lab report RUN_DIR [OTHER_RUN ...] [--output-dir DIR] [--videos N]`: the paper's tables and figures from a run's records, optionally with replayed episodes."""
+"""`grits-lab report RUN_DIR [OTHER_RUN ...] [--output-dir DIR] [--summary-to DIR] [--videos N]`: the paper's tables and figures from a run's records, optionally with replayed episodes."""
 
 from __future__ import annotations
 
@@ -26,6 +26,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--real", metavar="FILE.csv", action="append", default=[],
                         help="real-robot trials (method, food, level, trial, task_success, spillage, scoop_failure; "
                              "grits_lab/report/real_trials.py) shown beside the simulation and the paper; repeatable")
+    parser.add_argument("--summary-to", metavar="DIR", default=None,
+                        help="also write the experiment's committed summary into DIR (summary.csv, stage_cause.csv, claims.csv, "
+                             "provenance.json, config.yaml; grits_lab/report/summary.py), e.g. docs/experiments/NAME; "
+                             "then `grits-lab results render`")
     parser.add_argument("--videos", metavar="N", type=int, default=0,
                         help="replay up to N episodes per food under Diffusion Policy and GRITS (same seed) and show the videos "
                              "side by side (needs the run's checkpoints; RUN_DIR must be a `grits-lab evaluate` run directory)")
@@ -56,4 +60,11 @@ def _run(args: argparse.Namespace) -> int:
     print(f"report written to {result.out_dir} ({len(result.files)} files): {result.out_dir / 'report.html'}")
     for note in result.missing:
         print(f"  {note}")
+    if args.summary_to:
+        from grits_lab.report.run_records import load_run
+        from grits_lab.report.summary import write_summary
+
+        command = " ".join(["grits-lab report", args.run_dir, *args.also, "--summary-to", args.summary_to])
+        files = write_summary(load_run(args.run_dir, exclude=result.out_dir, also=args.also), args.summary_to, command)
+        print(f"summary written to {args.summary_to} ({', '.join(f.name for f in files)}); render the pages: grits-lab results render")
     return 0

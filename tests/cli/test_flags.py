@@ -80,7 +80,7 @@ def test_help_lists_the_commands_in_workflow_order_and_names_the_first_command(c
         _parse(["--help"])
     text = capsys.readouterr().out
     workflow = ["foods", "scene", "rollout", "collect", "dataset", "train", "compare-predictors", "evaluate", "replay",
-                "sweep", "report", "pipeline"]
+                "sweep", "report", "results", "pipeline"]
     listed = [line.split()[0] for line in text.split("COMMAND")[-1].splitlines() if line.startswith("    ") and not line.startswith("     ")]
     assert [c for c in listed if c in workflow] == workflow
     assert "first run: grits-lab pipeline experiments/quickstart.yaml" in text

@@ -1,0 +1,264 @@
+"""Render the results pages (README, docs/results.md, docs/experiments/*/README.md) from the committed summaries.
+
+A page holds generated blocks between two markers; everything outside them is hand-written and kept:
+
+    <!-- generated: KIND [EXPERIMENT] -->
+    ...replaced by `grits-lab results render`...
+    <!-- end generated -->
+
+KIND is one of BLOCKS: `outcomes`, `stages`, `provenance`, `headline` and `claims` read the
+summary files of docs/experiments/EXPERIMENT/ (grits_lab/report/summary.py); `index` lists every
+experiment folder. `grits-lab results check` (and tests/report/test_results_pages.py) fails when
+a page differs from what its summaries render.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+from pathlib import Path
+from typing import Callable
+
+import pandas as pd
+
+from grits_lab.errors import InputError
+from grits_lab.intervals import format_percent
+from grits_lab.records import OUTCOME_COLUMNS
+from grits_lab.report.spill_tables import CAUSE_NAMES, STAGE_NAMES
+from grits_lab.report.summary import CLAIMS_FILE, PROVENANCE_FILE, STAGES_FILE, SUMMARY_FILE
+from grits_lab.report.vocabulary import MAIN_METHODS, PAPER_RESULTS
+from grits_lab.sim.spill_metrics import SPILL_CAUSES, SPILL_STAGES
+
+EXPERIMENTS_DIR = Path("docs") / "experiments"
+PAGE_FILE = "README.md"
+BLOCK = re.compile(r"(<!-- generated: (?P<kind>[a-z_]+)(?: (?P<name>[A-Za-z0-9_.-]+))? -->\n)(?P<body>.*?)(<!-- end generated -->)", re.S)
+OUTCOME_HEADERS = {
+    "task_success": "Task success",
+    "spillage": "Spill during the scoop",
+    "scoop_failure": "Scoop failure",
+    "spill_after_scoop": "Spill after the scoop",
+    "delivered": "Lifted food delivered",
+    "reach_check_failed": "Reach check failed",
+    "error": "Errors",
+}
+
+
+def pages(root: str | Path) -> list[Path]:
+    """The pages that may hold generated blocks: README.md, docs/results.md and every experiment's page."""
+    root = Path(root)
+    found = [root / "README.md", root / "docs" / "results.md", *sorted((root / EXPERIMENTS_DIR).glob(f"*/{PAGE_FILE}"))]
+    return [p for p in found if p.is_file()]
+
+
+def render_page(text: str, page: Path, root: str | Path) -> str:
+    """`text` (the page at `page`) with every generated block rendered afresh; the rest unchanged."""
+    root = Path(root)
+
+    def block(match: re.Match[str]) -> str:
+        kind, name = match["kind"], match["name"]
+        if kind not in BLOCKS:
+            raise InputError(f"{page}: unknown generated block `{kind}`; one of {', '.join(BLOCKS)}")
+        if kind != "index" and not name:
+            raise InputError(f"{page}: the generated block `{kind}` needs an experiment name")
+        body = BLOCKS[kind](root, name, page.parent)
+        return f"{match.group(1)}{body.rstrip()}\n{match.group(5)}"
+
+    return BLOCK.sub(block, text)
+
+
+def render_all(root: str | Path) -> dict[Path, str]:
+    """Every page with generated blocks -> its rendered text."""
+    rendered = {}
+    for page in pages(root):
+        text = page.read_text()
+        if BLOCK.search(text):
+            rendered[page] = render_page(text, page, root)
+    return rendered
+
+
+def drifted(root: str | Path) -> list[Path]:
+    """The pages whose generated blocks differ from what the committed summaries render."""
+    return [page for page, text in render_all(root).items() if page.read_text() != text]
+
+
+def write_all(root: str | Path) -> list[Path]:
+    """Rewrite the pages that drifted; returns them."""
+    from grits_lab.io import write_text_atomic
+
+    changed = drifted(root)
+    rendered = render_all(root)
+    for page in changed:
+        write_text_atomic(page, rendered[page])
+    return changed
+
+
+# --- reading an experiment's files ------------------------------------------------------------
+
+def _folder(root: Path, name: str) -> Path:
+    folder = root / EXPERIMENTS_DIR / name
+    if not (folder / SUMMARY_FILE).is_file():
+        raise InputError(f"no summary for experiment `{name}`: {folder / SUMMARY_FILE} is missing; write it with "
+                         f"`grits-lab report RUN_DIR --summary-to {EXPERIMENTS_DIR / name}`")
+    return folder
+
+
+def _summary(root: Path, name: str) -> pd.DataFrame:
+    return pd.read_csv(_folder(root, name) / SUMMARY_FILE, keep_default_na=False, na_values=[""])
+
+
+def _provenance(root: Path, name: str) -> dict:
+    return json.loads((_folder(root, name) / PROVENANCE_FILE).read_text())
+
+
+def _cell(row: pd.Series | None, interval: bool = True) -> str:
+    if row is None or not row["n"]:
+        return "—"
+    k, n = int(row["k"]), int(row["n"])
+    bounds = f" [{format_percent(float(row['ci_low']))}, {format_percent(float(row['ci_high']))}]" if interval else ""
+    return f"{format_percent(k / n)}{bounds} ({k}/{n})"
+
+
+def _methods(summary: pd.DataFrame) -> list[tuple[str, str]]:
+    return list(dict.fromkeys(zip(summary["method"], summary["method_name"])))
+
+
+def _lookup(summary: pd.DataFrame, method: str, outcome: str) -> pd.Series | None:
+    rows = summary[(summary["method"] == method) & (summary["outcome"] == outcome)]
+    return rows.iloc[0] if len(rows) else None
+
+
+def _markdown(header: list[str], rows: list[list[str]], right: int = 1) -> str:
+    """A Markdown table; columns from `right` on are right-aligned."""
+    align = ["---" if i < right else "---:" for i in range(len(header))]
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(align) + "|"]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+# --- the blocks ---------------------------------------------------------------------------------
+
+def outcomes_block(root: Path, name: str, here: Path) -> str:
+    """Per method: episodes and every outcome the records give, rate [Wilson 95 %] (k/n)."""
+    summary = _summary(root, name)
+    shown = [o for o in OUTCOME_HEADERS if o in set(summary["outcome"])]
+    rows = []
+    for method, method_name in _methods(summary):
+        episodes = _lookup(summary, method, "task_success")
+        rows.append([method_name, str(int(episodes["n"])) if episodes is not None else "—",
+                     *(_cell(_lookup(summary, method, o)) for o in shown)])
+    table = _markdown(["Method", "Episodes", *(OUTCOME_HEADERS[o] for o in shown)], rows)
+    return (f"{table}\n\nRate [Wilson 95 % interval] (k/n). Lifted food delivered: of the episodes that lifted food; "
+            f"reach check failed: of the transfers checked. Files: [{SUMMARY_FILE}]({_link(root, name, SUMMARY_FILE, here)}), "
+            f"[{PROVENANCE_FILE}]({_link(root, name, PROVENANCE_FILE, here)}).")
+
+
+def stages_block(root: Path, name: str, here: Path) -> str:
+    """Stages in which a particle was lost, per method: episodes (particles) for each cause."""
+    stages = pd.read_csv(_folder(root, name) / STAGES_FILE)
+    if stages.empty:
+        return "The records predate the per-stage attribution (`spilled_<stage>_<cause>` columns)."
+    rows = []
+    for (method, method_name), group in stages.groupby(["method", "method_name"], sort=False):
+        n = int(group["episodes"].iloc[0])
+        for stage in SPILL_STAGES:
+            cells = group[group["stage"] == stage].set_index("cause")
+            if cells["particles"].sum() == 0:
+                continue
+            rows.append([f"{method_name}, {n}", STAGE_NAMES[stage],
+                         *(f"{int(cells.at[c, 'episodes_k'])} ({int(cells.at[c, 'particles'])})" if cells.at[c, "particles"] else "0"
+                           for c in SPILL_CAUSES)])
+    if not rows:
+        return "No particle was spilled in any episode."
+    table = _markdown(["Method, episodes", "Stage", *(CAUSE_NAMES[c].lower() for c in SPILL_CAUSES)], rows, right=2)
+    return f"{table}\n\nEpisodes (particles) that lost food each way, stages with a loss only. File: [{STAGES_FILE}]({_link(root, name, STAGES_FILE, here)})."
+
+
+def provenance_block(root: Path, name: str, here: Path) -> str:
+    """Protocol, commits, machine, dates, wall time, checkpoints and episodes per method, as bullets."""
+    p = _provenance(root, name)
+    packages = p.get("machine", {}).get("packages", {})
+    shown = ", ".join(f"{k} {packages[k]}" for k in ("python", "torch", "numpy", "pybullet") if k in packages)
+    records_commit = p.get("records' code commit")
+    lines = [
+        f"- Protocol: {', '.join(p.get('protocol', [])) or 'not recorded'}; records' code: `{records_commit}`.",
+        f"- Machine: host `{p.get('machine', {}).get('host')}`{'; ' + shown if shown else ''}; run started {p.get('run started (UTC)')} UTC.",
+        f"- Episode wall time, summed: {_duration(p.get('episode wall time (s, summed)'))}.",
+    ]
+    for method in p.get("methods", {}).values():
+        digests = "; ".join(f"{key} `{', '.join(values)}`" for key, values in method.get("checkpoint digests (sha256, first 16)", {}).items())
+        trials = method.get("trials", [])
+        lines.append(f"- {method['name']}: {method['episodes']} episodes, {method['foods']} foods, levels {', '.join(method['levels'])}, "
+                     f"trials {_span(trials)}" + (f"; checkpoints {digests}" if digests else "") + ".")
+    lines.append(f"- Summary written by `{p.get('command')}` (code `{p.get('summary code commit')}`).")
+    return "\n".join(lines)
+
+
+def headline_block(root: Path, name: str, here: Path) -> str:
+    """The paper's Fig. 5 methods: episodes and the three outcomes, this simulation beside the paper's real robot."""
+    summary = _summary(root, name)
+    methods = dict(_methods(summary))
+    order = [m for m in MAIN_METHODS if m in methods] + [m for m in methods if m not in MAIN_METHODS]
+    rows = []
+    for method in order:
+        episodes = _lookup(summary, method, "task_success")
+        paper = PAPER_RESULTS.get(method.split("[")[0], {})
+        rows.append([methods[method], str(int(episodes["n"])) if episodes is not None else "—",
+                     *(part for o in OUTCOME_COLUMNS for part in (_cell(_lookup(summary, method, o), interval=False),
+                                                                    format_percent(paper.get(o)) if o in paper else "—"))])
+    header = ["Method", "Episodes"] + [f"{OUTCOME_HEADERS[o]}, {who}" for o in OUTCOME_COLUMNS for who in ("sim", "paper")]
+    return _markdown(header, rows)
+
+
+def claims_block(root: Path, name: str, here: Path) -> str:
+    """The report's claims table (the paper's claims beside these records), as the summary holds it."""
+    claims = pd.read_csv(_folder(root, name) / CLAIMS_FILE, keep_default_na=False)
+    return _markdown(list(claims.columns), [list(map(str, row)) for row in claims.itertuples(index=False)], right=99)
+
+
+def index_block(root: Path, name: str | None, here: Path) -> str:
+    """Every experiment folder: its page's title, protocol and episodes per method."""
+    rows = []
+    for page in sorted((root / EXPERIMENTS_DIR).glob(f"*/{PAGE_FILE}")):
+        folder = page.parent
+        title = next((line[2:].strip() for line in page.read_text().splitlines() if line.startswith("# ")), folder.name)
+        link = os.path.relpath(page, here)
+        if (folder / PROVENANCE_FILE).is_file():
+            p = json.loads((folder / PROVENANCE_FILE).read_text())
+            protocol = ", ".join(p.get("protocol", []))
+            episodes = ", ".join(f"{m['name']} {m['episodes']}" for m in p.get("methods", {}).values())
+        else:
+            protocol, episodes = "—", "no summary yet"
+        rows.append([f"[{folder.name}]({link})", title, protocol, episodes])
+    return _markdown(["Experiment", "Question", "Protocol", "Episodes"], rows, right=99)
+
+
+BLOCKS: dict[str, Callable[[Path, str, Path], str]] = {
+    "outcomes": outcomes_block,
+    "stages": stages_block,
+    "provenance": provenance_block,
+    "headline": headline_block,
+    "claims": claims_block,
+    "index": index_block,
+}
+
+
+def _link(root: Path, name: str, file: str, here: Path) -> str:
+    return os.path.relpath(root / EXPERIMENTS_DIR / name / file, here)
+
+
+def _span(trials: list[int]) -> str:
+    if not trials:
+        return "not recorded"
+    if trials == list(range(trials[0], trials[-1] + 1)) and len(trials) > 1:
+        return f"{trials[0]}-{trials[-1]}"
+    return ", ".join(map(str, trials))
+
+
+def _duration(seconds: float | None) -> str:
+    if seconds is None or (isinstance(seconds, float) and math.isnan(seconds)):
+        return "not recorded"
+    minutes, rest = divmod(int(round(seconds)), 60)
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours} h {minutes:02d} min" if hours else f"{minutes} min {rest:02d} s"

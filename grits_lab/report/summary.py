@@ -1,0 +1,175 @@
+"""An experiment's committed summary: counts with Wilson intervals per method, spills by stage and cause, provenance.
+
+`grits-lab report RUN_DIR --summary-to docs/experiments/NAME` writes, into NAME's folder:
+
+    summary.csv       one row per method and outcome: k, n, rate, Wilson 95 % bounds (OUTCOMES)
+    stage_cause.csv   one row per method, stage and cause: episodes with such a spill, particles
+    claims.csv        the paper's claims beside these records (the report's claims table), when they hold its methods
+    provenance.json   protocol, commits, machine, dates, wall time, checkpoint digests, episodes per method
+    config.yaml       the run's config as it ran (RUN_DIR/config.yaml)
+
+The files count what the records hold and nothing else: a method with fewer episodes than its
+config plans has its own n. docs/results.md, the README's table and every experiment page are
+rendered from these files (grits_lab/report/results_pages.py).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import shutil
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from grits_lab.intervals import rate
+from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
+from grits_lab.records import OUTCOME_COLUMNS
+from grits_lab.report.run_records import RunData
+from grits_lab.report.spill_tables import AFTER_SCOOP, DELIVERED_SHARE, attribution_counts, has_attribution, spilled_after_scoop
+from grits_lab.report.tables import all_variants, claims_table
+from grits_lab.report.vocabulary import MAIN_METHODS
+from grits_lab.sim.spill_metrics import SPILL_CAUSES, SPILL_STAGES
+from grits_lab.versions import git_commit
+
+SUMMARY_FILE = "summary.csv"
+STAGES_FILE = "stage_cause.csv"
+CLAIMS_FILE = "claims.csv"
+PROVENANCE_FILE = "provenance.json"
+CONFIG_FILE = "config.yaml"
+
+# outcome -> what k counts, and over which episodes (n).
+OUTCOMES: dict[str, str] = {
+    "task_success": "task success, of all episodes",
+    "spillage": "a spill during the scoop, of all episodes",
+    "scoop_failure": "too little lifted, of all episodes",
+    "spill_after_scoop": "a particle lost after the scoop (lift, carry, pour or after it), of all episodes",
+    **{f"spill_{stage}": f"a particle lost in the {stage.replace('_', ' ')}, of all episodes" for stage in AFTER_SCOOP},
+    "delivered": f"at least {DELIVERED_SHARE:.0%} of the lifted food in the target bowl and nothing lost after the scoop, "
+                 "of the episodes that lifted food",
+    "reach_check_failed": "no option of the transfer's reach check passed, of the transfers checked",
+    "error": "the episode ended with an error (counted as a task failure), of all episodes",
+}
+SUMMARY_COLUMNS = ("method", "method_name", "outcome", "k", "n", "rate", "ci_low", "ci_high")
+STAGE_COLUMNS = ("method", "method_name", "stage", "cause", "episodes_k", "episodes", "particles")
+
+
+def summary_table(episodes: pd.DataFrame) -> pd.DataFrame:
+    """(methods x outcomes) rows of SUMMARY_COLUMNS from normalized records, one method variant at a time.
+
+    Outcomes the records cannot give (records without the stage x cause columns, without
+    `scooped` or `transfer_reachable`) are left out, never written as zeros."""
+    rows = []
+    attributed = has_attribution(episodes)
+    for variant, name in all_variants(episodes):
+        group = episodes[episodes["variant"] == variant]
+        counts: dict[str, tuple[int, int]] = {o: (int(group[o].sum()), len(group)) for o in OUTCOME_COLUMNS}
+        if attributed:
+            counts["spill_after_scoop"] = (int((spilled_after_scoop(group) > 0).sum()), len(group))
+            by_cell = attribution_counts(group)
+            for stage in AFTER_SCOOP:
+                lost = by_cell[[f"spilled_{stage}_{cause}" for cause in SPILL_CAUSES]].sum(axis=1) > 0
+                counts[f"spill_{stage}"] = (int(lost.sum()), len(group))
+            if {"scooped", "transferred"} <= set(group.columns):
+                lifted = group[~group["is_error"] & (pd.to_numeric(group["scooped"], errors="coerce") > 0)]
+                share = pd.to_numeric(lifted["transferred"], errors="coerce") / pd.to_numeric(lifted["scooped"], errors="coerce")
+                delivered = (share >= DELIVERED_SHARE) & (spilled_after_scoop(lifted) == 0)
+                counts["delivered"] = (int(delivered.sum()), len(lifted))
+        if "transfer_reachable" in group.columns:
+            checked = group["transfer_reachable"].map(lambda v: None if v is None or (isinstance(v, float) and math.isnan(v)) else bool(v))
+            checked = checked[checked.notna()]
+            if len(checked):
+                counts["reach_check_failed"] = (int((checked == False).sum()), len(checked))  # noqa: E712
+        counts["error"] = (int(group["is_error"].sum()), len(group))
+        for outcome in OUTCOMES:
+            if outcome in counts:
+                k, n = counts[outcome]
+                r = rate(k, n)
+                rows.append({"method": variant, "method_name": name, "outcome": outcome, "k": k, "n": n,
+                             "rate": _round(r.rate), "ci_low": _round(r.low), "ci_high": _round(r.high)})
+    return pd.DataFrame(rows, columns=list(SUMMARY_COLUMNS))
+
+
+def stage_cause_table(episodes: pd.DataFrame) -> pd.DataFrame:
+    """Per method, stage and cause: episodes with at least one particle lost that way, and the particles.
+
+    Empty when the records predate the `spilled_<stage>_<cause>` columns."""
+    rows = []
+    if has_attribution(episodes):
+        for variant, name in all_variants(episodes):
+            group = episodes[episodes["variant"] == variant]
+            counts = attribution_counts(group)
+            for stage in SPILL_STAGES:
+                for cause in SPILL_CAUSES:
+                    column = counts[f"spilled_{stage}_{cause}"]
+                    rows.append({"method": variant, "method_name": name, "stage": stage, "cause": cause,
+                                 "episodes_k": int((column > 0).sum()), "episodes": len(group), "particles": int(column.sum())})
+    return pd.DataFrame(rows, columns=list(STAGE_COLUMNS))
+
+
+def summary_provenance(run: RunData, command: str) -> dict[str, Any]:
+    """What produced the records (from the run's provenance.json and the records) and the summary."""
+    episodes = run.episodes
+    runs = run.provenance.get("provenance.json", {}) if isinstance(run.provenance.get("provenance.json"), dict) else {}
+    per_method = {}
+    for variant, name in all_variants(episodes):
+        group = episodes[episodes["variant"] == variant]
+        digests = {column.removeprefix("checkpoint_"): sorted(map(str, group[column].dropna().unique()))
+                   for column in sorted(c for c in group.columns if c.startswith("checkpoint_")) if group[column].notna().any()}
+        trials = sorted(int(t) for t in pd.to_numeric(group["trial"], errors="coerce").dropna().unique()) if "trial" in group else []
+        per_method[variant] = {
+            "name": name,
+            "episodes": len(group),
+            "trials": trials,
+            "foods": int(group["food_key"].nunique()),
+            "levels": sorted(map(str, group["level"].unique())),
+            "checkpoint digests (sha256, first 16)": digests,
+            "episode wall time (s, summed)": round(float(pd.to_numeric(group.get("wall_time_s"), errors="coerce").sum()), 1)
+            if "wall_time_s" in group else None,
+        }
+    return {
+        "command": command,
+        "run directories": [str(run.run_dir), *map(str, run.also_runs)],
+        "protocol": sorted(map(str, episodes["protocol"].unique())) if "protocol" in episodes else [],
+        "records' code commit": runs.get("code git commit"),
+        "run started (UTC)": runs.get("started (UTC)"),
+        "machine": {"host": runs.get("host"), "packages": runs.get("packages", {})},
+        "episodes": int(len(episodes)),
+        "episode wall time (s, summed)": round(float(pd.to_numeric(episodes["wall_time_s"], errors="coerce").sum()), 1)
+        if "wall_time_s" in episodes else None,
+        "methods": per_method,
+        "summary code commit": git_commit(),
+        "summary written (UTC)": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S"),
+    }
+
+
+def write_summary(run: RunData, out_dir: str | Path, command: str) -> list[Path]:
+    """Write summary.csv, stage_cause.csv, claims.csv, provenance.json and config.yaml into `out_dir`
+    (a claims.csv left by an earlier summary of other records is removed when these hold none of the paper's methods)."""
+    from grits_lab.errors import InputError
+
+    if run.episodes is None or run.episodes.empty:
+        raise InputError(f"--summary-to needs episode records; {run.run_dir} has none")
+    out = Path(out_dir)
+    ensure_writable_dir(out)
+    files = []
+    tables = [(SUMMARY_FILE, summary_table(run.episodes)), (STAGES_FILE, stage_cause_table(run.episodes))]
+    if run.episodes["method"].isin(MAIN_METHODS).any():  # the paper's claims concern its methods, not the oracle
+        tables.append((CLAIMS_FILE, claims_table(run.episodes).display))
+    for name, frame in tables:
+        write_text_atomic(out / name, frame.to_csv(index=False, lineterminator="\n"))
+        files.append(out / name)
+    if CLAIMS_FILE not in dict(tables):
+        (out / CLAIMS_FILE).unlink(missing_ok=True)
+    write_json_atomic(out / PROVENANCE_FILE, summary_provenance(run, command))
+    files.append(out / PROVENANCE_FILE)
+    config = (run.run_dir if run.run_dir.is_dir() else run.run_dir.parent) / CONFIG_FILE
+    if config.is_file():
+        shutil.copyfile(config, out / CONFIG_FILE)
+        files.append(out / CONFIG_FILE)
+    return files
+
+
+def _round(value: float) -> float:
+    return value if math.isnan(value) else round(value, 6)

@@ -1,0 +1,85 @@
+"""Results are generated, not written: an experiment's summary counts what its records hold, and the
+README, docs/results.md and the experiment pages are rendered from the committed summaries."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from grits_lab.cli import main
+from grits_lab.errors import InputError
+from grits_lab.report.results_pages import drifted, render_all, write_all
+from grits_lab.sim.spill_metrics import attribution_columns
+from tests.report.synthetic_records import episode
+
+def _records(tmp_path: Path) -> Path:
+    """dp: 3 episodes (1 success, 1 spill in the scoop, 1 carry loss); grits: 1 episode with an error."""
+    rows = []
+    for trial, (outcome, lost, transferred) in enumerate([("success", {}, 20), ("spill", {"spilled_scoop_over_rim": 2}, 20),
+                                                          ("transfer_fail", {"spilled_carry_off_spoon": 3}, 10)]):
+        row = episode("dp", "sago", "low", trial, outcome)
+        row.update({c: 0 for c in attribution_columns()}, **lost, transferred=transferred)
+        rows.append(row)
+    row = episode("grits", "sago", "low", 0, "success", error="boom")
+    row.update({c: 0 for c in attribution_columns()})
+    rows.append(row)
+    run = tmp_path / "run"
+    run.mkdir()
+    pd.DataFrame(rows).to_parquet(run / "episodes.parquet")
+    (run / "config.yaml").write_text("run_id: synthetic\n")
+    (run / "provenance.json").write_text(json.dumps({"code git commit": "abc123", "host": "box", "started (UTC)": "2026-01-02 03:04:05",
+                                                     "packages": {"python": "3.11.7"}}))
+    return run
+
+
+def test_the_summary_counts_what_the_records_hold_with_wilson_intervals(tmp_path, capsys):
+    run = _records(tmp_path)
+    out = tmp_path / "docs" / "experiments" / "tiny"
+    assert main(["report", str(run), "--output-dir", str(tmp_path / "report"), "--summary-to", str(out)]) == 0
+    summary = pd.read_csv(out / "summary.csv").set_index(["method", "outcome"])
+    assert summary.loc[("dp", "task_success"), ["k", "n"]].tolist() == [1, 3]
+    assert summary.loc[("dp", "spillage"), ["k", "n"]].tolist() == [1, 3]
+    assert summary.loc[("dp", "spill_after_scoop"), ["k", "n"]].tolist() == [1, 3]
+    assert summary.loc[("dp", "spill_carry"), "k"] == 1 and summary.loc[("dp", "spill_pour"), "k"] == 0
+    assert summary.loc[("dp", "delivered"), ["k", "n"]].tolist() == [2, 3]  # the carry's loss is not delivered
+    assert summary.loc[("dp", "task_success"), ["ci_low", "ci_high"]].tolist() == [0.061492, 0.79234]  # Wilson, 1 of 3
+    assert summary.loc[("grits", "error"), ["k", "n"]].tolist() == [1, 1]
+    assert summary.loc[("grits", "task_success"), "k"] == 0  # an error is a failure
+    stages = pd.read_csv(out / "stage_cause.csv").set_index(["method", "stage", "cause"])
+    assert stages.loc[("dp", "carry", "off_spoon"), ["episodes_k", "episodes", "particles"]].tolist() == [1, 3, 3]
+    provenance = json.loads((out / "provenance.json").read_text())
+    assert provenance["methods"]["dp"]["episodes"] == 3 and provenance["methods"]["dp"]["trials"] == [0, 1, 2]
+    assert provenance["records' code commit"] == "abc123" and provenance["machine"]["host"] == "box"
+    assert provenance["protocol"] and provenance["episode wall time (s, summed)"] == 50.0
+    assert (out / "config.yaml").read_text() == "run_id: synthetic\n" and (out / "claims.csv").is_file()
+
+
+def test_rendering_replaces_only_the_generated_blocks_and_check_finds_the_drift(tmp_path, capsys):
+    run = _records(tmp_path)
+    assert main(["report", str(run), "--output-dir", str(tmp_path / "report"), "--summary-to",
+                 str(tmp_path / "docs" / "experiments" / "tiny")]) == 0
+    page = tmp_path / "docs" / "experiments" / "tiny" / "README.md"
+    page.write_text("# Tiny: does it count?\n\nWritten by hand.\n\n<!-- generated: outcomes tiny -->\nold\n<!-- end generated -->\n\nAfter.\n")
+    results = tmp_path / "docs" / "results.md"
+    results.write_text("Intro.\n<!-- generated: headline tiny -->\n<!-- end generated -->\n<!-- generated: index -->\n<!-- end generated -->\n")
+    capsys.readouterr()
+    assert main(["results", "check", "--root", str(tmp_path)]) == 1
+    assert "docs/experiments/tiny/README.md differs from its summaries" in capsys.readouterr().out
+    assert sorted(write_all(tmp_path)) == sorted([page, results]) and not drifted(tmp_path)
+    text = page.read_text()
+    assert text.startswith("# Tiny: does it count?\n\nWritten by hand.\n") and text.endswith("<!-- end generated -->\n\nAfter.\n")
+    assert "| Diffusion Policy | 3 | 33.3% [6.1%, 79.2%] (1/3) |" in text and "old" not in text
+    index = results.read_text()
+    assert "| [tiny](experiments/tiny/README.md) | Tiny: does it count? |" in index
+    assert "| GRITS | 1 | 0.0% (0/1) | 82.0% |" in index  # the paper's number beside the simulation's
+    assert main(["results", "check", "--root", str(tmp_path)]) == 0
+
+
+def test_a_block_naming_an_experiment_without_a_summary_names_the_command_that_writes_it(tmp_path):
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "results.md").write_text("<!-- generated: outcomes nothing -->\n<!-- end generated -->\n")
+    with pytest.raises(InputError, match=r"no summary for experiment `nothing`.*--summary-to docs/experiments/nothing"):
+        render_all(tmp_path)
