@@ -145,12 +145,12 @@ except GritsError as exc:
     assert f"ERR the Ray cluster at {ray_head} requires token authentication" in proc.stdout, proc.stdout + proc.stderr[-2000:]
 
 
-README = os.path.join(os.path.dirname(__file__), "..", "..", "README.md")
+CLUSTER_DOC = os.path.join(os.path.dirname(__file__), "..", "..", "docs", "cluster.md")
 
 
-def _readme_cluster_steps():
-    """The README's "Scaling out" step 1 (commands) and step 2's environment, as a user reads them."""
-    text = open(README).read().split("## Scaling out", 1)[1].split("```bash", 1)[1].split("```", 1)[0]
+def _cluster_steps():
+    """docs/cluster.md's "Scaling out" step 1 (commands) and step 2's environment, as a user reads them."""
+    text = open(CLUSTER_DOC).read().split("## Scaling out", 1)[1].split("```bash", 1)[1].split("```", 1)[0]
     step1 = text.split("# 1.", 1)[1].split("# 2.", 1)[0].splitlines()[1:]
     commands = [line.split("#", 1)[0].strip() for line in step1 if line.split("#", 1)[0].strip()]
     exports = [line for line in text.split("# 2.", 1)[1].splitlines() if line.startswith("export ")]
@@ -160,15 +160,15 @@ def _readme_cluster_steps():
 
 @pytest.fixture
 def two_nodes(tmp_path):
-    """A head and a worker node on this machine, started with the README's step-1 commands as written
+    """A head and a worker node on this machine, started with the step-1 commands of docs/cluster.md as written
     (the head given a free port, 1 CPU, its own temp dir; the worker 2 CPUs). Yields (address, env, worker pgid)."""
     import tempfile
 
-    commands, env_vars = _readme_cluster_steps()
+    commands, env_vars = _cluster_steps()
     port = _free_port()
     temp_dir = tempfile.mkdtemp(prefix="rn", dir="/tmp")  # short: Ray's socket paths must fit 107 bytes
     groups, env = [], dict(os.environ, RAY_USAGE_STATS_ENABLED="0")
-    env.pop("RAY_AUTH_MODE", None)  # the README's lines say where it is needed
+    env.pop("RAY_AUTH_MODE", None)  # the doc's lines say where it is needed
     try:
         for command in commands:
             line = command.replace("HEAD_IP", "127.0.0.1").replace("6379", str(port))
@@ -179,7 +179,7 @@ def two_nodes(tmp_path):
             proc = subprocess.Popen(["bash", "-c", line], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
             out, _ = proc.communicate(timeout=120)
             groups.append(proc.pid)
-            assert proc.returncode == 0, f"README step 1 failed: {line}\n{out.decode()[-2000:]}"
+            assert proc.returncode == 0, f"docs/cluster.md step 1 failed: {line}\n{out.decode()[-2000:]}"
         client_env = dict(env, **{k: v.replace("HEAD_IP", "127.0.0.1").replace("6379", str(port)) for k, v in env_vars.items()})
         yield f"127.0.0.1:{port}", client_env, groups[-1]
     finally:
