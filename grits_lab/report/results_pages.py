@@ -62,7 +62,10 @@ def render_page(text: str, page: Path, root: str | Path) -> str:
             raise InputError(f"{page}: unknown generated block `{kind}`; one of {', '.join(BLOCKS)}")
         if kind != "index" and not name:
             raise InputError(f"{page}: the generated block `{kind}` needs an experiment name")
-        body = BLOCKS[kind](root, name, page.parent)
+        try:
+            body = BLOCKS[kind](root, name, page.parent)
+        except _NotSummarised as missing:
+            body = str(missing)
         return f"{match.group(1)}{body.rstrip()}\n{match.group(5)}"
 
     return BLOCK.sub(block, text)
@@ -96,11 +99,18 @@ def write_all(root: str | Path) -> list[Path]:
 
 # --- reading an experiment's files ------------------------------------------------------------
 
+class _NotSummarised(Exception):
+    """An experiment folder without its summary yet: the block says so and names the command."""
+
+
 def _folder(root: Path, name: str) -> Path:
+    """docs/experiments/NAME; InputError when the folder does not exist (a misspelt name)."""
     folder = root / EXPERIMENTS_DIR / name
+    if not folder.is_dir():
+        raise InputError(f"no experiment `{name}`: {folder} does not exist")
     if not (folder / SUMMARY_FILE).is_file():
-        raise InputError(f"no summary for experiment `{name}`: {folder / SUMMARY_FILE} is missing; write it with "
-                         f"`grits-lab report RUN_DIR --summary-to {EXPERIMENTS_DIR / name}`")
+        raise _NotSummarised(f"No summary yet: `grits-lab report RUN_DIR --summary-to {EXPERIMENTS_DIR / name}`, "
+                             "then `grits-lab results render`.")
     return folder
 
 

@@ -78,8 +78,11 @@ def test_rendering_replaces_only_the_generated_blocks_and_check_finds_the_drift(
     assert main(["results", "check", "--root", str(tmp_path)]) == 0
 
 
-def test_a_block_naming_an_experiment_without_a_summary_names_the_command_that_writes_it(tmp_path):
-    (tmp_path / "docs").mkdir()
-    (tmp_path / "docs" / "results.md").write_text("<!-- generated: outcomes nothing -->\n<!-- end generated -->\n")
-    with pytest.raises(InputError, match=r"no summary for experiment `nothing`.*--summary-to docs/experiments/nothing"):
+def test_a_block_names_the_command_that_writes_a_missing_summary_and_refuses_an_unknown_experiment(tmp_path):
+    (tmp_path / "docs" / "experiments" / "later").mkdir(parents=True)
+    results = tmp_path / "docs" / "results.md"
+    results.write_text("<!-- generated: outcomes later -->\n<!-- end generated -->\n")
+    assert "No summary yet: `grits-lab report RUN_DIR --summary-to docs/experiments/later`" in render_all(tmp_path)[results]
+    results.write_text("<!-- generated: outcomes nothing -->\n<!-- end generated -->\n")
+    with pytest.raises(InputError, match=r"no experiment `nothing`: .*docs/experiments/nothing does not exist"):
         render_all(tmp_path)
