@@ -15,6 +15,16 @@ from grits_lab.report.results_pages import drifted, render_all, write_all
 from grits_lab.sim.spill_metrics import attribution_columns
 from tests.report.synthetic_records import episode
 
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_the_committed_pages_match_their_summaries():
+    stale = drifted(ROOT)
+    assert not stale, (f"{', '.join(str(p.relative_to(ROOT)) for p in stale)} differ from docs/experiments/*/summary.csv: "
+                       "run `grits-lab results render` (a new run: `grits-lab report RUN_DIR --summary-to docs/experiments/NAME` first)")
+    assert ROOT / "README.md" in render_all(ROOT) and ROOT / "docs" / "results.md" in render_all(ROOT)
+
+
 def _records(tmp_path: Path) -> Path:
     """dp: 3 episodes (1 success, 1 spill in the scoop, 1 carry loss); grits: 1 episode with an error."""
     rows = []
