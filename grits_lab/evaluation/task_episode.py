@@ -207,8 +207,9 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     "max_joint_step_rad" (the largest change of a commanded joint angle in one action, rad) and
     "max_joint_speed_ratio" (the largest over that joint's Panda velocity limit: above 1 no Panda
     could follow; the flips to another arm posture that throw a load measured 0.6-1.7 rad, 3-8x);
-    "plan" (the option taken, transfer.py `TransferOption.describe`), "reachable" (whether the
-    reach check passed; None unchecked), "checks" (options checked before moving), "spilled_by_stage"
+    "plan" (the option taken, transfer.py `TransferOption.describe`, or "held: ..." when no option
+    passed and `settings.no_option` is "hold": the arm keeps the spoon where the scoop left it),
+    "reachable" (whether the reach check passed; None unchecked), "checks" (options checked before moving), "spilled_by_stage"
     (spilled count at the end of each stage), "carry_peak_speed_mps" / "carry_peak_accel_mps2"
     (of the spoon's commanded path in the lift and carry, from its per-action differences).
     """
@@ -243,13 +244,18 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
         speed_ratios.append(float(info["joint_speed_ratio"]))
         scene.advance()
 
-    for action, stage in zip(plan.actions, plan.stages):
-        step(action, stage)
-    for _ in range(settings.settle_steps):
-        step(plan.actions[-1], "after_pour")
+    held = bool(plan.n_checks) and not plan.reachable and settings.no_option == "hold"
+    if held:  # no motion the arm can follow: it keeps the spoon where the scoop left it
+        for _ in range(settings.settle_steps):
+            step(current, "lift")
+    else:
+        for action, stage in zip(plan.actions, plan.stages):
+            step(action, stage)
+        for _ in range(settings.settle_steps):
+            step(plan.actions[-1], "after_pour")
     metrics = env.metrics()
     spilled_by_stage[env.tracker.stage] = int(metrics["spilled"])
-    moving = np.array([a for a, stage in zip(plan.actions, plan.stages) if stage != "pour"], dtype=np.float64)
+    moving = np.array([current] if held else [a for a, stage in zip(plan.actions, plan.stages) if stage != "pour"], dtype=np.float64)
     velocity = np.diff(np.concatenate([current[None, :3], moving[:, :3]]), axis=0) * env.config.control_hz
     accel = np.diff(np.concatenate([np.zeros((1, 3)), velocity, np.zeros((1, 3))]), axis=0) * env.config.control_hz
     return {
@@ -260,9 +266,9 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
         "spilled_by_stage": spilled_by_stage,
         "target_locate_error_m": float(np.linalg.norm(target.centre[:2] - truth[:2])),
         "target_fit_residual_m": target.residual,
-        "transfer_steps": int(len(plan.actions) + settings.settle_steps),
-        "pour_steps": plan.n_pour,
-        "plan": plan.option.describe(),
+        "transfer_steps": int((0 if held else len(plan.actions)) + settings.settle_steps),
+        "pour_steps": 0 if held else plan.n_pour,
+        "plan": f"held: no option passed ({plan.n_checks} checked)" if held else plan.option.describe(),
         "reachable": plan.reachable if plan.n_checks else None,
         "checks": plan.n_checks,
         "carry_peak_speed_mps": float(np.linalg.norm(velocity, axis=1).max()) if len(velocity) else 0.0,

@@ -66,6 +66,11 @@ class TransferSettings:
     alternative_pour_heights: list[float] = field(default_factory=lambda: [0.02, 0.04])
     alternative_pour_offsets: list[float] = field(default_factory=lambda: [0.03, -0.03])
     max_checks: int = 16
+    # When no option passes: "hold" keeps the loaded spoon where the scoop left it (a planner that
+    # finds no motion within the arm's reach and velocity limits does not move; the task fails with
+    # nothing delivered); "best" runs the option that went farthest, unreachable poses and all
+    # (scoop-v3's behaviour; its joint jumps throw the load).
+    no_option: Literal["hold", "best"] = "hold"
 
     def __post_init__(self) -> None:
         require(self.clearance > 0, "transfer.clearance", self.clearance, "positive")

@@ -238,3 +238,20 @@ def test_the_pour_puts_the_lip_the_food_leaves_by_over_the_targets_centre():
     lips = np.array([p[:3] + rot6d_to_matrix(p[3:9].astype(np.float64)) @ lip_local for p in pour])
     assert lips[-1, 2] < target.rim_height - 0.015  # well inside the bowl at the end of the roll
     assert np.linalg.norm(lips[len(lips) // 2, :2] - target.centre[:2]) < 0.01  # mid-roll, over the centre
+
+
+def test_when_no_option_passes_the_arm_holds_the_spoon_instead_of_running_a_motion_it_cannot_follow(env):
+    """A target by the robot's base with no alternative to fall back on: the one option fails the
+    check, and with `no_option: hold` the arm does not move (scoop-v3 ran it anyway and jumped)."""
+    from grits_lab.evaluation.evaluation_config import TransferSettings
+    from grits_lab.evaluation.task_episode import run_transfer
+
+    scene, _, _ = _scene_obstacles(env, (0.30, 0.20))
+    settings = TransferSettings(alternative_level_steps=[], alternative_level_yaw_deg=[], alternative_pour_heights=[],
+                                alternative_pour_offsets=[])
+    before = env.spoon_pose()
+    out = run_transfer(env, scene, settings)
+    assert out["reachable"] is False and out["plan"].startswith("held: no option passed")
+    assert out["transfer_steps"] == settings.settle_steps and out["pour_steps"] == 0 and out["ik_failures"] == 0
+    assert np.linalg.norm(env.spoon_pose()[:3, 3] - before[:3, 3]) < 0.005
+    assert out["max_joint_speed_ratio"] <= 1.0
