@@ -197,8 +197,9 @@ class _FilmedEnv:
             return
         frame = render_frame(self._env, self._camera)
         lines = [self._title, f"step {step:>3}   {self._env.tracker.stage.replace('_', ' ')}   spilled {int(info.get('spilled', 0))}"]
-        lost = attribution_caption(self._env.metrics()["spill_attribution"])
-        self.frames.append(caption(frame, lines + ([lost] if lost else [])))
+        # Always three lines: every frame of a video must have the same size.
+        lost = attribution_caption(self._env.metrics()["spill_attribution"]) or "lost: nothing"
+        self.frames.append(caption(frame, lines + [lost]))
 
     def reset(self, *args: Any, **kwargs: Any) -> Any:
         obs, info = self._env.reset(*args, **kwargs)

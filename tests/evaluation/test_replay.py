@@ -49,9 +49,11 @@ def test_a_filmed_replay_is_the_same_episode_and_writes_a_captioned_video(run, t
     try:
         frames = reader.count_frames()
         first = reader.get_data(0)
+        shapes = {reader.get_data(i).shape for i in range(frames)}
     finally:
         reader.close()
     assert frames == result.frames and frames >= steps // 5 + 1
+    assert shapes == {first.shape}  # one size for every frame, whatever the caption says
     # 72 rows of scene under a caption band, padded by the encoder to a multiple of 16.
     assert first.shape[1] == 96 and first.shape[0] >= 72 + 2 * 18
     assert first[:20].mean() < first[50:].mean()  # the dark caption band sits on top

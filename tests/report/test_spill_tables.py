@@ -83,3 +83,27 @@ def test_the_load_loss_figure_is_drawn_from_the_records_and_skipped_without_them
     assert load_loss_figure(run, tmp_path / "loss.png") == tmp_path / "loss.png" and (tmp_path / "loss.png").stat().st_size > 0
     bare = normalize_records(pd.DataFrame([episode("dp", "sago", "low", 0, "success")]))
     assert load_loss_figure(bare, tmp_path / "none.png") is None and not (tmp_path / "none.png").exists()
+
+
+def test_every_replay_frame_has_the_same_caption_height_whether_or_not_food_was_lost(monkeypatch):
+    """A video's frames must share one size: the caption keeps its line for what was lost even
+    before anything was (the renderer is replaced by a blank frame: only the caption is under test)."""
+    import numpy as np
+
+    import grits_lab.sim.video as video
+    from grits_lab.report.replay import _FilmedEnv
+
+    class Episode:
+        tracker = type("Tracker", (), {"stage": "carry"})()
+        lost = {c: 0 for c in attribution_columns()}
+
+        def metrics(self):
+            return {"spill_attribution": dict(self.lost)}
+
+    monkeypatch.setattr(video, "render_frame", lambda env, camera: np.zeros((40, 60, 3), np.uint8))
+    episode_env = Episode()
+    filmed = _FilmedEnv(episode_env, "dp sago/low trial 0", camera=None, every=1)
+    filmed._film({"step": 0, "spilled": 0})
+    episode_env.lost["spilled_carry_off_spoon"] = 2
+    filmed._film({"step": 1, "spilled": 2})
+    assert filmed.frames[0].shape == filmed.frames[1].shape
