@@ -29,7 +29,7 @@ import numpy as np
 
 from grits_lab.errors import InputError
 from grits_lab.geometry import matrix_to_rot6d, rot6d_to_matrix
-from grits_lab.sim.env import interpolate_pose, pose9_to_matrix
+from grits_lab.sim.env import interpolate_pose, matrix_to_pose9, pose9_to_matrix
 
 
 @dataclass
@@ -92,6 +92,11 @@ def min_jerk(n: int) -> np.ndarray:
 MIN_JERK_PEAK_SPEED = 1.875  # peak over mean speed of `min_jerk`
 
 
+def profile_fractions(n: int, profile: str) -> np.ndarray:
+    """(n,) fractions of a move done after each of its n actions: "min_jerk" (`min_jerk`) or equal steps."""
+    return min_jerk(n) if profile == "min_jerk" else np.arange(1, n + 1) / n
+
+
 def _line(a: np.ndarray, b: np.ndarray, rotation: np.ndarray, max_step: float, end_rotation: np.ndarray | None = None,
           min_steps: int = 1, profile: str = "constant") -> list[np.ndarray]:
     """Waypoints from a to b (a excluded), one per action, turning from `rotation` to `end_rotation`
@@ -104,7 +109,7 @@ def _line(a: np.ndarray, b: np.ndarray, rotation: np.ndarray, max_step: float, e
     length = float(np.linalg.norm(b - a))
     peak = MIN_JERK_PEAK_SPEED if profile == "min_jerk" else 1.0
     n = max(min_steps, int(math.ceil(peak * length / max_step)))
-    fractions = min_jerk(n) if profile == "min_jerk" else np.arange(1, n + 1) / n
+    fractions = profile_fractions(n, profile)
     m0, m1 = np.eye(4), np.eye(4)
     m0[:3, :3], m1[:3, :3] = rotation, rotation if end_rotation is None else end_rotation
     return [_pose(a + (b - a) * f, interpolate_pose(m0, m1, f)[:3, :3]) for f in fractions]
@@ -177,9 +182,8 @@ def pour_motion(pose: np.ndarray, angle_deg: float, steps: int, profile: str = "
     (profile: "constant" equal increments, "min_jerk" from rest to rest, `min_jerk`). A positive
     angle raises the spoon's +y side: the food leaves over its -y lip."""
     rot = rot6d_to_matrix(np.asarray(pose[3:9], dtype=np.float64))
-    fractions = min_jerk(steps) if profile == "min_jerk" else np.arange(1, steps + 1) / steps
     out = []
-    for f in fractions:
+    for f in profile_fractions(steps, profile):
         a = math.radians(angle_deg) * f
         roll = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
         out.append(_pose(np.asarray(pose[:3], dtype=np.float64), rot @ roll))
@@ -214,17 +218,13 @@ def slow_to_limits(start: np.ndarray, actions: np.ndarray, stages: list[str], ch
         for action, stage in zip(actions, stages):
             target = pose9_to_matrix(action)
             k = factor[stage]
-            new_actions += [_pose(*_split(interpolate_pose(previous, target, j / k))) for j in range(1, k + 1)]
+            new_actions += [matrix_to_pose9(interpolate_pose(previous, target, j / k)).astype(np.float32) for j in range(1, k + 1)]
             new_stages += [stage] * k
             previous = target
         slowdown = {st: slowdown[st] * factor[st] for st in slowdown}
         actions, stages = np.stack(new_actions), new_stages
         answer = check(actions)
     return actions, stages, answer, not bool((answer.speed_ratios > 1.0 + 1e-9).any())
-
-
-def _split(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    return m[:3, 3], m[:3, :3]
 
 
 @dataclass(frozen=True)
@@ -246,15 +246,13 @@ class TransferPlan:
     """The chosen transfer: actions (T, 9) from the lift to the end of the pour, stages (T,) each
     action's stage ("lift", "carry", "pour"), the option that made them, whether the check passed
     (`reachable`: no unreachable pose after the first, no joint faster than the Panda's limit, or
-    over `max_joint_step` without slowing), how many paths were checked (`n_checks`, 0 unchecked),
-    and the largest joint speed ratio of the actions (`max_speed_ratio`, NaN unchecked)."""
+    over `max_joint_step` without slowing), and how many paths were checked (`n_checks`, 0 unchecked)."""
 
     actions: np.ndarray
     stages: list[str]
     option: TransferOption
     reachable: bool
     n_checks: int
-    max_speed_ratio: float = math.nan
 
     @property
     def n_pour(self) -> int:
@@ -329,7 +327,7 @@ def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[O
         unreachable = answer.unreachable.copy()
         unreachable[0] = False
         bad = bad | unreachable
-        plan = TransferPlan(actions, stages, option, not bad.any(), n_checks, float(answer.speed_ratios.max()))
+        plan = TransferPlan(actions, stages, option, not bad.any(), n_checks)
         if plan.reachable:
             return plan
         key = (key_step, int(answer.unreachable[1:].sum()))

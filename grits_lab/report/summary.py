@@ -27,10 +27,11 @@ from grits_lab.intervals import rate
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
 from grits_lab.records import OUTCOME_COLUMNS
 from grits_lab.report.run_records import RunData
-from grits_lab.report.spill_tables import AFTER_SCOOP, DELIVERED_SHARE, attribution_counts, has_attribution, spilled_after_scoop
+from grits_lab.report.spill_tables import (AFTER_SCOOP, DELIVERED_SHARE, attribution_counts, has_attribution, spill_attribution_table,
+                                           spilled_after_scoop)
 from grits_lab.report.tables import all_variants, claims_table
 from grits_lab.report.vocabulary import MAIN_METHODS
-from grits_lab.sim.spill_metrics import SPILL_CAUSES, SPILL_STAGES
+from grits_lab.sim.spill_metrics import SPILL_CAUSES
 from grits_lab.versions import git_commit
 
 SUMMARY_FILE = "summary.csv"
@@ -92,20 +93,14 @@ def summary_table(episodes: pd.DataFrame) -> pd.DataFrame:
 
 
 def stage_cause_table(episodes: pd.DataFrame) -> pd.DataFrame:
-    """Per method, stage and cause: episodes with at least one particle lost that way, and the particles.
+    """Per method, stage and cause: episodes with at least one particle lost that way, and the particles
+    (the data of the report's `spill_attribution_table`, one row per method variant, stage and cause).
 
     Empty when the records predate the `spilled_<stage>_<cause>` columns."""
-    rows = []
-    if has_attribution(episodes):
-        for variant, name in all_variants(episodes):
-            group = episodes[episodes["variant"] == variant]
-            counts = attribution_counts(group)
-            for stage in SPILL_STAGES:
-                for cause in SPILL_CAUSES:
-                    column = counts[f"spilled_{stage}_{cause}"]
-                    rows.append({"method": variant, "method_name": name, "stage": stage, "cause": cause,
-                                 "episodes_k": int((column > 0).sum()), "episodes": len(group), "particles": int(column.sum())})
-    return pd.DataFrame(rows, columns=list(STAGE_COLUMNS))
+    data = spill_attribution_table(episodes).data
+    if data.empty:
+        return pd.DataFrame(columns=list(STAGE_COLUMNS))
+    return data.assign(method=data["variant"])[list(STAGE_COLUMNS)]
 
 
 def summary_provenance(run: RunData, command: str) -> dict[str, Any]:
