@@ -69,11 +69,6 @@ def outside_bowl(positions: np.ndarray, bowl_position: np.ndarray, bowl: BowlGeo
     return (r > bowl.outer_radius + 0.003) | ((d[:, 2] < bowl.depth) & (r > wall_outer)) | (d[:, 2] < -0.01)
 
 
-def spoon_outside_bowl(spoon_pose: np.ndarray, bowl_position: np.ndarray, bowl: BowlGeometry) -> bool:
-    """Whether the spoon frame's origin is beyond the bowl's outer rim in the table plane."""
-    return bool(np.linalg.norm(spoon_pose[:2, 3] - bowl_position[:2]) > bowl.outer_radius)
-
-
 def classify(positions: np.ndarray, spoon_pose: np.ndarray, source_position: np.ndarray, target_position: np.ndarray,
              source: BowlGeometry, target: BowlGeometry, spoon: SpoonGeometry) -> ParticleCounts:
     in_spoon = in_spoon_mask(positions, spoon_pose, spoon)
