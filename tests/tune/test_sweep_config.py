@@ -103,6 +103,7 @@ def test_evaluation_overrides_reach_the_trials_evaluation_config_and_the_study_i
 
     # the checkpoint and cluster checks need trained models; what is checked here is the config
     monkeypatch.setattr(grits_binding, "_check_against_evaluation", lambda evaluation, method: None)
+    monkeypatch.setattr(grits_binding, "method_checkpoints", lambda method, checkpoints: {})
     evaluation = {"config": str(REPO / "experiments" / "evaluate_cpu.yaml"), "checkpoints": [], "method": "grits"}
     plain = load_study_config(sweep_file(evaluator="grits", evaluation=evaluation))
     normalized = load_study_config(sweep_file(evaluator="grits", evaluation={
