@@ -113,10 +113,76 @@ def expert_task_episode(tmp_path: Path) -> dict[str, Any]:
     return {k: v for k, v in record.items() if not k.startswith("_") and k != "renders"}
 
 
+class _Millimetre:
+    """A controller whose actions are rounded to 1 mm (1e-3 in the rotation's 6D columns): the
+    network's float32 arithmetic may differ by ~1e-7 between CPUs, and the rounding keeps that
+    noise out of the simulation, so the record pins the evaluation pipeline, not the CPU."""
+
+    def __init__(self, inner: Any) -> None:
+        self._inner = inner
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._inner, name)
+
+    def plan(self, history: Any, scene: Any) -> Any:
+        chunk = self._inner.plan(history, scene)
+        if chunk is not None:
+            chunk.actions = np.round(chunk.actions.astype(np.float64), 3).astype(np.float32)
+            if chunk.unguided_actions is not None:
+                chunk.unguided_actions = np.round(chunk.unguided_actions.astype(np.float64), 3).astype(np.float32)
+        return chunk
+
+
+def tiny_policy_task_episode(tmp_path: Path) -> dict[str, Any]:
+    """One evaluation episode of the `dp` method with a tiny diffusion policy (seeded initial weights,
+    one training step on four expert demonstrations): demonstration windows and normalizers, the
+    checkpoint, observation history, DDIM sampling, receding-horizon chunks, the scoop's end and the
+    record's columns. A policy this small does not scoop (most of its poses are IK failures), so the
+    transfer is pinned by expert_task_episode. Perturbing its weights by 1e-6 leaves the record equal."""
+    import torch
+
+    from grits_lab.config import config_from_dict
+    from grits_lab.evaluation.evaluation_config import EvaluationConfig
+    from grits_lab.evaluation.methods import build_controller
+    from grits_lab.evaluation.task_episode import run_task_episode
+    from grits_lab.perception.env_clouds import builder_for_env
+    from grits_lab.policies.diffusion.training_diffusion import PolicyTrainConfig, train_policy
+    from grits_lab.sim import ScoopEnv
+    from tests.evaluation.conftest import write_demos
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        demos = write_demos(tmp_path / "demos")
+        train_policy(config_from_dict(PolicyTrainConfig, {
+            "dataset": str(demos), "output_dir": str(tmp_path / "dp"), "batch_size": 4, "max_steps": 1, "lr": 1e-4,
+            "warmup_steps": 0, "val_fraction": 0.0, "log_every": 1, "checkpoint_every": 1, "num_threads": 1, "seed": 0,
+            "cache_points_per_object": 32,
+            "policy": {"horizon": 16, "n_obs_steps": 2, "n_action_steps": 12,
+                       "obs_encoder": {"kind": "pointcloud", "points_per_object": 16, "point_hidden": [16], "feature_dim": 8, "cloud_steps": 1},
+                       "unet": {"down_dims": [16, 32], "kernel_size": 3, "n_groups": 4, "diffusion_step_embed_dim": 16}},
+        }), progress=False)
+        config = config_from_dict(EvaluationConfig, {
+            "methods": ["dp"], "foods": [FOOD], "levels": [LEVEL], "trials": 1,
+            "scoop": {"max_steps": 36, "min_steps": 12}, "cloud": {"n_points": 32, "cad_surface_samples": 400}})
+        paths = {"policy": str(tmp_path / "dp" / "checkpoints" / "last.pt")}
+        controller = _Millimetre(build_controller("dp", config, paths, lambda key, factory: factory()))
+        env = ScoopEnv(config.sim)
+        try:
+            record = run_task_episode(env, controller, config, seed=SEED, food=FOOD, level=LEVEL,
+                                      builder=builder_for_env(config.cloud, env))
+        finally:
+            env.close()
+    finally:
+        torch.set_num_threads(threads)
+    return {k: v for k, v in record.items() if not k.startswith("_") and k != "renders"}
+
+
 GOLDEN: dict[str, Callable[[Path], dict[str, Any]]] = {
     "expert_rollout.json": expert_rollout,
     "expert_task_episode.json": expert_task_episode,
     "spillage_trial.json": spillage_trial,
+    "tiny_policy_task_episode.json": tiny_policy_task_episode,
 }
 
 
