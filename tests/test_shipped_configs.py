@@ -109,16 +109,18 @@ def test_a_misspelled_sim_key_in_a_shipped_stage_config_fails_at_load_naming_it(
     assert f"unknown key `{block}.time_stpe`" in str(info.value)
 
 
-def test_datasets_collected_before_are_still_recognized_by_their_config(tmp_path):
-    """Fingerprints stored by datasets collected before the sim block was typed (`sim: {}`) and the
-    chunk length took the policy's name (`chunk_len`): each dataset still matches its config and
-    resumes instead of being refused; a dataset of another config is still refused."""
+def test_datasets_collected_before_are_recognized_by_their_config_or_refused_by_the_chunk_lengths_old_name(tmp_path):
+    """Fingerprints stored by datasets collected before the sim block was typed (`sim: {}`): a demos
+    dataset still matches its config and resumes. A spillage dataset of then calls the chunk length
+    `chunk_len` (before scoop-v4): it is refused in one line naming its manifest and the key, never
+    resumed; a dataset of another config is still refused."""
     import yaml
 
     from grits_lab.collection.driver import existing_manifest
     from grits_lab.collection.jobs import load_collect_config
+    from grits_lab.config import config_fingerprint
     from grits_lab.data.format import MANIFEST_FILE
-    from grits_lab.errors import StorageError
+    from grits_lab.errors import ConfigError, StorageError
 
     stored = {"demos.yaml": "44337bd0841efe53", "demos_cpu.yaml": "66784ff117cfd6ad", "demos_quick.yaml": "deaee82b43f607c7",
               "spillage.yaml": "e6847f2aed697ab6", "spillage_cpu.yaml": "e572800d4c39c388", "spillage_quick.yaml": "4e44dd76c6349ce0"}
@@ -127,8 +129,21 @@ def test_datasets_collected_before_are_still_recognized_by_their_config(tmp_path
         assert config.identity()["sim"] == {}
         folder = tmp_path / name
         folder.mkdir()
-        (folder / MANIFEST_FILE).write_text(yaml.safe_dump({"kind": config.kind, "fingerprint": fingerprint}))
-        assert existing_manifest(folder, config.kind, config.identity())["fingerprint"] == fingerprint
+        identity = config.identity()
+        if config.kind == "spillage":
+            identity["chunk_len"] = identity.pop("n_action_steps")  # the manifest's config as it was stored
+        (folder / MANIFEST_FILE).write_text(yaml.safe_dump({"kind": config.kind, "fingerprint": fingerprint, "config": identity}))
+        if config.kind == "demos":
+            assert existing_manifest(folder, config.kind, config.identity())["fingerprint"] == fingerprint
+            continue
+        with pytest.raises(ConfigError, match=rf"^{folder / MANIFEST_FILE}: `chunk_len` is the chunk length's name before "
+                                              r"scoop-v4, .*; collect it again under the current protocol: choose another output "
+                                              r"or remove it \(docs/migration.md\)$"):
+            existing_manifest(folder, config.kind, config.identity())
+    current = load_collect_config(ROOT / "experiments" / "spillage_cpu.yaml")
+    (tmp_path / "spillage_cpu.yaml" / MANIFEST_FILE).write_text(yaml.safe_dump(
+        {"kind": "spillage", "fingerprint": config_fingerprint(current.identity()), "config": current.identity()}))
+    assert existing_manifest(tmp_path / "spillage_cpu.yaml", "spillage", current.identity())["kind"] == "spillage"
     with pytest.raises(StorageError, match="different config"):
         existing_manifest(tmp_path / "spillage_cpu.yaml", "spillage", load_collect_config(ROOT / "experiments" / "spillage_quick.yaml").identity())
 

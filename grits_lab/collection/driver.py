@@ -20,12 +20,12 @@ import yaml
 from grits_lab.config import config_changes, config_fingerprint, config_to_dict, parse_yaml
 from grits_lab.data.format import (
     FORMAT_VERSION,
-    LEGACY_CHUNK_KEY,
     MANIFEST_FILE,
+    RETIRED_CHUNK_KEY,
     list_episode_files,
     rebuild_index,
+    refuse_retired_chunk_key,
     verify_episode,
-    with_chunk_key,
     write_episode,
 )
 from grits_lab.errors import StorageError
@@ -68,7 +68,8 @@ def existing_manifest(out_dir: str | Path, kind: str, identity: Any) -> dict[str
     """The manifest of the dataset at `out_dir` (None: no dataset there yet); writes nothing.
 
     A dataset made from another config (or of another kind, or under another task protocol) is
-    refused: resuming it would mix two.
+    refused: resuming it would mix two. One that calls the chunk length `chunk_len` (stored before
+    scoop-v4) is refused naming that key.
     """
     manifest_path = Path(out_dir) / MANIFEST_FILE
     if not manifest_path.exists():
@@ -77,9 +78,10 @@ def existing_manifest(out_dir: str | Path, kind: str, identity: Any) -> dict[str
         manifest = parse_yaml(manifest_path.read_text(), manifest_path) or {}
     except yaml.YAMLError as exc:
         raise StorageError(f"unreadable manifest {manifest_path}: {exc}") from None
+    stored = manifest.get("config") if isinstance(manifest.get("config"), dict) else {}
+    refuse_retired_chunk_key(stored, manifest_path, RETIRED_CHUNK_KEY, "collect it again under the current protocol: choose another output or remove it")
     fingerprint = config_fingerprint(identity)
-    stored_as = {fingerprint, config_fingerprint(with_chunk_key(identity, LEGACY_CHUNK_KEY))}  # either name of the chunk length
-    if manifest.get("fingerprint") not in stored_as or manifest.get("kind") != kind:
+    if manifest.get("fingerprint") != fingerprint or manifest.get("kind") != kind:
         raise StorageError(
             f"{out_dir} holds a {manifest.get('kind')} dataset made with a different config "
             f"(fingerprint {manifest.get('fingerprint')} vs {fingerprint}); choose another output or remove it"

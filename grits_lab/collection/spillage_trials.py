@@ -153,7 +153,10 @@ class SpillageConfig:
         from grits_lab.collection.driver import collection_identity
 
         identity = collection_identity(self)
-        identity["trials"] = identity.pop("episodes")  # its name before the rename: datasets made then keep their fingerprint
+        # The fingerprint's recipe is fixed, not a reader of old names: it hashes the dataset's size
+        # as `trials`, as every stored dataset's fingerprint (this protocol's included) was taken;
+        # renaming it here would refuse them all as "made with a different config".
+        identity["trials"] = identity.pop("episodes")
         # Keys added with the carry and the horizon label, left out at the values that make the data
         # of before them, so datasets made then keep their fingerprint.
         if self.balance_on == "chunk":

@@ -22,7 +22,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from grits_lab.errors import StorageError
+from grits_lab.errors import ConfigError, StorageError
 from grits_lab.io import save_npz_atomic, save_parquet_atomic
 from grits_lab.perception.composite import CLOUD_OBJECTS  # noqa: F401  (the order of stored cloud objects)
 
@@ -30,16 +30,25 @@ FORMAT_VERSION = 1
 MANIFEST_FILE = "dataset.yaml"
 INDEX_FILE = "index.parquet"
 EPISODE_DIR = "episodes"
-# A spillage dataset's chunk length is the policy's `n_action_steps`; data written before it took
-# that name (collection configs, manifests, episode meta, predictor checkpoints) call it
-# `chunk_len`. Readers accept either (`with_chunk_key`).
-CHUNK_KEY, LEGACY_CHUNK_KEY = "n_action_steps", "chunk_len"
+# A spillage dataset's chunk length is the policy's `n_action_steps`. Data and checkpoints stored
+# before scoop-v4 call it `chunk_len`; readers refuse that name (`refuse_retired_chunk_key`), never
+# read it (docs/migration.md).
+CHUNK_KEY, RETIRED_CHUNK_KEY = "n_action_steps", "chunk_len"
 
 
-def with_chunk_key(mapping: dict[str, Any], key: str = CHUNK_KEY) -> dict[str, Any]:
-    """`mapping` with its chunk length, stored under either name, under `key`: CHUNK_KEY to read
-    stored data, LEGACY_CHUNK_KEY for the fingerprint that data stored under the old name carries."""
-    return {(key if k in (CHUNK_KEY, LEGACY_CHUNK_KEY) else k): v for k, v in mapping.items()}
+def refuse_retired_chunk_key(names: Iterable[str], source: str | Path, key: str, remedy: str) -> None:
+    """ConfigError naming `source` and `key` when `names` (a stored config's keys, an index's columns)
+    hold the chunk length's retired name; `remedy` says what to do instead."""
+    if RETIRED_CHUNK_KEY in names:
+        raise ConfigError(f"{source}: `{key}` is the chunk length's name before scoop-v4, which this code "
+                          f"no longer reads (it reads `{CHUNK_KEY}`); {remedy} (docs/migration.md)")
+
+
+def with_chunk_key(stored: dict[str, Any]) -> dict[str, Any]:
+    """`stored`, a predictor's stored model config, unchanged; ConfigError if it says `chunk_len`
+    (`read_checkpoint` already refuses that, so a config it returned passes as it is)."""
+    refuse_retired_chunk_key(stored, "a stored config", RETIRED_CHUNK_KEY, "train the predictor again under the current protocol")
+    return stored
 
 
 def episode_path(dataset_dir: str | Path, episode_id: str) -> Path:

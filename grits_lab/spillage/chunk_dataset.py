@@ -24,12 +24,12 @@ from grits_lab.data.chunk_labels import LABEL_ARRAYS, TRIAL_LABELS
 from grits_lab.data.format import (
     CHUNK_KEY,
     EPISODE_DIR,
-    LEGACY_CHUNK_KEY,
     MANIFEST_FILE,
+    RETIRED_CHUNK_KEY,
     load_index,
     read_episode,
+    refuse_retired_chunk_key,
     require_finite,
-    with_chunk_key,
 )
 from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import ConfigError, InputError, StorageError
@@ -53,7 +53,7 @@ def check_spillage_dataset(dataset_dir: str | Path, n_action_steps: int | None =
     """The dataset's index (DataFrame) after checking that it exists, is of kind "spillage",
     given `n_action_steps`, that its labels judge chunks of that many actions (ConfigError naming `key`),
     and that it holds the `label` asked for (ConfigError naming `label_key`).
-    Datasets collected before the key took the policy's name record it as `chunk_len`."""
+    A dataset that calls the chunk length `chunk_len` (collected before scoop-v4) is refused naming that key."""
     dataset_dir = Path(dataset_dir)
     if not (dataset_dir / EPISODE_DIR).is_dir():
         raise StorageError(f"no spillage dataset at {dataset_dir} (missing {EPISODE_DIR}/); collect one first")
@@ -63,12 +63,15 @@ def check_spillage_dataset(dataset_dir: str | Path, n_action_steps: int | None =
         kind = manifest.get("kind")
         if kind != "spillage":
             raise InputError(f"{dataset_dir} is a dataset of kind {kind!r}; the predictor trains on kind 'spillage'")
+    stored = manifest.get("config") if isinstance(manifest.get("config"), dict) else {}
+    remedy = "collect the dataset again under the current protocol"
+    refuse_retired_chunk_key(stored, manifest_path, RETIRED_CHUNK_KEY, remedy)
     index = load_index(dataset_dir)
+    refuse_retired_chunk_key(index.columns, dataset_dir / EPISODE_DIR, RETIRED_CHUNK_KEY, remedy)  # the episodes' meta
     if len(index) == 0:
         raise StorageError(f"the spillage dataset at {dataset_dir} holds no episodes")
     if n_action_steps is not None:
-        collected = {int(v) for name in (CHUNK_KEY, LEGACY_CHUNK_KEY) if name in index.columns for v in index[name].dropna().unique()}
-        stored = with_chunk_key(manifest["config"]) if isinstance(manifest.get("config"), dict) else {}
+        collected = {int(v) for v in index[CHUNK_KEY].dropna().unique()} if CHUNK_KEY in index.columns else set()
         if not collected and CHUNK_KEY in stored:
             collected = {int(stored[CHUNK_KEY])}
         if collected and collected != {n_action_steps}:

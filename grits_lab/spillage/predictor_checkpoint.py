@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from grits_lab.config import config_from_dict, config_to_dict
-from grits_lab.data.format import with_chunk_key
+from grits_lab.data.format import RETIRED_CHUNK_KEY, refuse_retired_chunk_key
 from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import ConfigError, StorageError
 from grits_lab.spillage.predictor_config import PredictorConfig
@@ -69,24 +69,23 @@ def save_predictor(path: str | Path, *, config: PredictorConfig, model: Spillage
 
 
 def read_checkpoint(path: str | Path) -> dict[str, Any]:
+    """The checkpoint's payload; StorageError if it is not a predictor checkpoint, ConfigError if its
+    config calls the chunk length `model.chunk_len` (trained before scoop-v4)."""
     payload = load_checkpoint(path)
     if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
         raise StorageError(f"{path} is not a spillage predictor checkpoint")
+    config = payload.get("config")
+    model = config.get("model") if isinstance(config, dict) else None
+    if isinstance(model, dict):
+        refuse_retired_chunk_key(model, path, f"model.{RETIRED_CHUNK_KEY}", "train the predictor again under the current protocol")
     return payload
-
-
-def _stored_config(config: Any) -> Any:
-    """A checkpoint's stored config, with `model.chunk_len` of earlier checkpoints read as `model.n_action_steps`."""
-    if isinstance(config, dict) and isinstance(config.get("model"), dict):
-        return {**config, "model": with_chunk_key(config["model"])}
-    return config
 
 
 def load_predictor(path: str | Path, for_inference: bool = True) -> TrainedPredictor:
     """Rebuild a trained predictor; `for_inference` puts it in eval mode with frozen weights."""
     payload = read_checkpoint(path)
     try:
-        config = config_from_dict(PredictorConfig, _stored_config(payload["config"]))
+        config = config_from_dict(PredictorConfig, payload["config"])
     except ConfigError as exc:
         raise StorageError(f"{path}: stored config is invalid: {exc}") from None
     model = SpillagePredictor(config.model)

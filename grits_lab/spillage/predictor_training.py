@@ -22,7 +22,6 @@ from torch.utils.data import DataLoader
 
 from grits_lab.config import config_fingerprint, config_to_dict
 from grits_lab.data.chunk_labels import LABEL_ARRAYS, LABELS
-from grits_lab.data.format import LEGACY_CHUNK_KEY, with_chunk_key
 from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import ConfigError, InputError
 from grits_lab.io import ensure_writable_dir, exclusive_directory, write_json_atomic, write_text_atomic
@@ -40,15 +39,13 @@ def run_dir(config: PredictorConfig) -> Path:
     return Path(config.output_dir) / config.name
 
 
-def _resume_fingerprints(config: PredictorConfig) -> tuple[str, str]:
-    """Fingerprint of everything that must match to resume (`train.epochs` may grow: train longer),
-    and the same with `model.n_action_steps` under its old name, which earlier checkpoints carry."""
+def _resume_fingerprint(config: PredictorConfig) -> str:
+    """Fingerprint of everything that must match to resume (`train.epochs` may grow: train longer)."""
     described = config_to_dict(config)
     del described["train"]["epochs"]
     if described["data"]["label"] == "chunk":  # the only label before the key existed: those runs still resume
         del described["data"]["label"]
-    legacy = {**described, "model": with_chunk_key(described["model"], LEGACY_CHUNK_KEY)}
-    return config_fingerprint(described), config_fingerprint(legacy)
+    return config_fingerprint(described)
 
 
 def _loader(dataset: SpillageChunkDataset, batch_size: int) -> DataLoader:
@@ -83,7 +80,7 @@ def train_predictor(config: PredictorConfig, restart: bool = False, progress: bo
 def _train_in(out: Path, config: PredictorConfig, index: Any, restart: bool, progress: bool) -> dict[str, Any]:
     from tqdm import tqdm
 
-    fingerprint, legacy_fingerprint = _resume_fingerprints(config)
+    fingerprint = _resume_fingerprint(config)
     dataset_dir = Path(config.data.dataset)
     last_path, best_path = out / "last.pt", out / "best.pt"
     cloud_key = CLOUD_KEYS[config.data.cloud_source]
@@ -97,7 +94,7 @@ def _train_in(out: Path, config: PredictorConfig, index: Any, restart: bool, pro
     best_score = math.inf
     state = read_checkpoint(last_path) if last_path.exists() and not restart else None
     if state is not None:
-        if state.get("fingerprint") not in (fingerprint, legacy_fingerprint):
+        if state.get("fingerprint") != fingerprint:
             raise ConfigError(f"{last_path} was trained with a different config (only `train.epochs` may change on resume); pass --restart to start over")
         model.load_state_dict(state["model"])
         optimizer.load_state_dict(state["optimizer"])

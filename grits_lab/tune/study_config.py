@@ -238,15 +238,16 @@ class StudyConfig:
         return config_fingerprint({
             "rho": self.rho, "s": self.s, "train_timesteps": self.train_timesteps,
             "objective": self.objective,
-            # the validation block as studies stored it when its root seed was called `root_seed`,
-            # so that those studies still resume
+            # The identity's recipe is fixed, not a reader of old names: the validation block is hashed
+            # with its root seed as `root_seed`, as every stored study's identity (this protocol's
+            # included) was taken; renaming it here would refuse them all.
             "validation": {"foods": v.foods, "levels": v.levels, "trials": v.trials, "root_seed": v.seed},
             "evaluator": self.evaluator, "evaluation": self._evaluation_identity(),
         })
 
     def _evaluation_identity(self) -> dict[str, Any]:
-        """The evaluation block as studies stored it before `overrides` existed when it has none,
-        so that those studies still resume."""
+        """The evaluation block as the identity hashes it: without `overrides` when there are none, as
+        every stored study without overrides was hashed (the recipe is fixed)."""
         block = config_to_dict(self.evaluation)
         if not block["overrides"]:
             del block["overrides"]

@@ -11,15 +11,18 @@ from grits_lab.spillage.predictor_checkpoint import read_checkpoint
 from grits_lab.training.checkpoints import save_checkpoint
 
 
-@pytest.mark.parametrize("stored_as", ["n_action_steps", "chunk_len"])  # chunk_len: checkpoints saved before the rename
-def test_a_predictor_that_judges_other_chunks_than_the_policy_executes_is_refused(models, tmp_path, stored_as):
+@pytest.mark.parametrize("stored_as, refusal", [
+    ("n_action_steps", r"`checkpoints.predictor` judges chunks of 8 actions, .* executes 12"),
+    ("chunk_len", r"pred8.pt: `model.chunk_len` is the chunk length's name before scoop-v4, .* train the predictor again"),
+])
+def test_a_predictor_that_judges_other_chunks_than_the_policy_executes_is_refused(models, tmp_path, stored_as, refusal):
     payload = read_checkpoint(models["predictor"])
     model = payload["config"]["model"]
     del model["n_action_steps"]
-    model[stored_as] = 8  # the policy executes 12
+    model[stored_as] = 8  # the policy executes 12; chunk_len: the name predictors trained before scoop-v4 store
     save_checkpoint(tmp_path / "pred8.pt", payload)
     config = eval_config(models, tmp_path / "run", methods=["dp", "grits"], checkpoints={"predictor": str(tmp_path / "pred8.pt")})
-    with pytest.raises(ConfigError, match=r"`checkpoints.predictor` judges chunks of 8 actions, .* executes 12"):
+    with pytest.raises(ConfigError, match=refusal):
         evaluate(config, progress=False)
     assert not (tmp_path / "run").exists()
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import pandas as pd
 from pathlib import Path
@@ -119,38 +120,71 @@ def test_cli_trains_evaluates_and_reports_bad_input_in_one_line(tmp_path, tiny_d
     assert "kind 'spillage'" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("stored_as", ["n_action_steps", "chunk_len"])  # chunk_len: datasets collected before the rename
-def test_a_predictor_chunk_length_the_dataset_was_not_collected_with_is_refused_before_training(tmp_path, tiny_dataset, stored_as):
+def test_a_predictor_chunk_length_the_dataset_was_not_collected_with_is_refused_before_training(tmp_path, tiny_dataset):
     import shutil
 
     dataset = Path(shutil.copytree(tiny_dataset, tmp_path / "d12"))  # collected with chunks of 12
     manifest = yaml.safe_load((dataset / "dataset.yaml").read_text())
-    (dataset / "dataset.yaml").write_text(yaml.safe_dump({**manifest, "config": {stored_as: 12}}))
+    (dataset / "dataset.yaml").write_text(yaml.safe_dump({**manifest, "config": {"n_action_steps": 12}}))
     with pytest.raises(ConfigError, match=r"`model.n_action_steps` is 8, .* collected with n_action_steps 12"):
         train_predictor(_config(tmp_path, dataset, epochs=1, n_action_steps=8), progress=False)
     assert not (tmp_path / "runs").exists()
 
 
-def test_a_checkpoint_saved_before_the_chunk_length_took_the_policys_name_loads_and_resumes(tmp_path, tiny_dataset):
-    from grits_lab.config import config_fingerprint, config_to_dict
-    from grits_lab.spillage.predictor_checkpoint import load_predictor, read_checkpoint
+def _retired(source, key, remedy):
+    """The one line that refuses `key`, the chunk length's name before scoop-v4, in `source`."""
+    return (rf"^{re.escape(str(source))}: `{re.escape(key)}` is the chunk length's name before scoop-v4, which this code "
+            rf"no longer reads \(it reads `n_action_steps`\); {remedy} under the current protocol \(docs/migration.md\)$")
+
+
+def test_a_dataset_that_calls_the_chunk_length_chunk_len_is_refused_naming_the_file_and_key(tmp_path, tiny_dataset):
+    import shutil
+
+    from grits_lab.data.format import rebuild_index, read_episode, write_episode
+
+    # Its manifest's collection config says `chunk_len`, as every dataset collected before scoop-v4 does.
+    dataset = Path(shutil.copytree(tiny_dataset, tmp_path / "old"))
+    manifest = yaml.safe_load((dataset / "dataset.yaml").read_text())
+    (dataset / "dataset.yaml").write_text(yaml.safe_dump({**manifest, "config": {"chunk_len": 12}}))
+    with pytest.raises(ConfigError, match=_retired(dataset / "dataset.yaml", "chunk_len", "collect the dataset again")):
+        train_predictor(_config(tmp_path, dataset, epochs=1), progress=False)
+    assert not (tmp_path / "runs").exists()
+
+    # Episodes whose meta says `chunk_len`, without a manifest to say so first.
+    (dataset / "dataset.yaml").unlink()
+    for path in sorted((dataset / "episodes").glob("*.npz")):
+        arrays, meta = read_episode(path)
+        meta["chunk_len"] = meta.pop("n_action_steps", 12)
+        write_episode(dataset, meta.pop("episode_id"), arrays, meta)
+    rebuild_index(dataset)
+    refused = _retired(dataset / "episodes", "chunk_len", "collect the dataset again")
+    with pytest.raises(ConfigError, match=refused):
+        train_predictor(_config(tmp_path, dataset, epochs=1), progress=False)
+    with pytest.raises(ConfigError, match=refused):  # scoring a predictor on it, as compare-predictors does
+        evaluate_predictor(load_predictor(_trained(tmp_path, tiny_dataset)), dataset)
+
+
+def _trained(tmp_path, dataset):
+    train_predictor(_config(tmp_path, dataset, epochs=1), progress=False)
+    return tmp_path / "runs" / "tiny" / "last.pt"
+
+
+def test_a_checkpoint_that_calls_the_chunk_length_chunk_len_is_refused_to_load_and_to_resume(tmp_path, tiny_dataset):
+    from grits_lab.spillage.predictor_checkpoint import read_checkpoint
     from grits_lab.training.checkpoints import save_checkpoint
 
-    cfg = _config(tmp_path, tiny_dataset, epochs=1)
-    train_predictor(cfg, progress=False)
-    last = tmp_path / "runs" / "tiny" / "last.pt"
+    last = _trained(tmp_path, tiny_dataset)
     payload = read_checkpoint(last)
     model = payload["config"]["model"]
-    model["chunk_len"] = model.pop("n_action_steps")
-    described = config_to_dict(cfg)  # what such a checkpoint's resume fingerprint hashed
-    del described["train"]["epochs"], described["data"]["label"]  # it also predates `data.label`
-    described["model"]["chunk_len"] = described["model"].pop("n_action_steps")
-    payload["fingerprint"] = config_fingerprint(described)
+    model["chunk_len"] = model.pop("n_action_steps")  # as predictors trained before scoop-v4 store it
     save_checkpoint(last, payload)
-    assert load_predictor(last).config.model.n_action_steps == 12
-    train_predictor(_config(tmp_path, tiny_dataset, epochs=2), progress=False)  # resumes: the fingerprint matches
-    resumed = read_checkpoint(last)
-    assert resumed["epoch"] == 1 and len(resumed["history"]) == 2 and resumed["config"]["model"]["n_action_steps"] == 12
+    refused = _retired(last, "model.chunk_len", "train the predictor again")
+    with pytest.raises(ConfigError, match=refused):
+        load_predictor(last)
+    with pytest.raises(ConfigError, match=refused):
+        train_predictor(_config(tmp_path, tiny_dataset, epochs=2), progress=False)  # resuming it
+    train_predictor(_config(tmp_path, tiny_dataset, epochs=2), restart=True, progress=False)  # starting over writes the current name
+    assert read_checkpoint(last)["config"]["model"]["n_action_steps"] == 12
 
 
 def test_a_non_finite_value_in_the_dataset_is_refused_naming_its_file(tmp_path, tiny_dataset):
@@ -262,14 +296,14 @@ def test_label_errors_name_the_key(tmp_path, tiny_dataset):
 
 def test_a_chunk_label_run_keeps_the_resume_fingerprint_of_runs_made_before_the_label_key(tmp_path, tiny_dataset):
     from grits_lab.config import config_fingerprint
-    from grits_lab.spillage.predictor_training import _resume_fingerprints
+    from grits_lab.spillage.predictor_training import _resume_fingerprint
 
     cfg = _config(tmp_path, tiny_dataset)
     before = config_to_dict(cfg)
     del before["train"]["epochs"], before["data"]["label"]
-    assert _resume_fingerprints(cfg)[0] == config_fingerprint(before)
+    assert _resume_fingerprint(cfg) == config_fingerprint(before)
     cfg.data.label = "horizon"
-    assert _resume_fingerprints(cfg)[0] != config_fingerprint(before)
+    assert _resume_fingerprint(cfg) != config_fingerprint(before)
 
 
 def test_cli_scores_either_label_and_compare_needs_one_when_predictors_differ(tmp_path, tiny_horizon_dataset, capsys):
