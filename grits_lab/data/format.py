@@ -44,13 +44,6 @@ def refuse_retired_chunk_key(names: Iterable[str], source: str | Path, key: str,
                           f"no longer reads (it reads `{CHUNK_KEY}`); {remedy} (docs/migration.md)")
 
 
-def with_chunk_key(stored: dict[str, Any]) -> dict[str, Any]:
-    """`stored`, a predictor's stored model config, unchanged; ConfigError if it says `chunk_len`
-    (`read_checkpoint` already refuses that, so a config it returned passes as it is)."""
-    refuse_retired_chunk_key(stored, "a stored config", RETIRED_CHUNK_KEY, "train the predictor again under the current protocol")
-    return stored
-
-
 def episode_path(dataset_dir: str | Path, episode_id: str) -> Path:
     return Path(dataset_dir) / EPISODE_DIR / f"{episode_id}.npz"
 

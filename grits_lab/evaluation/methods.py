@@ -168,12 +168,12 @@ def check_method_checkpoints(name: str, paths: dict[str, str]) -> None:
     spec = METHODS.get(name)
     if spec is None or spec.predictor is None:
         return
-    from grits_lab.data.format import CHUNK_KEY, with_chunk_key
+    from grits_lab.data.format import CHUNK_KEY
     from grits_lab.spillage.predictor_checkpoint import read_checkpoint
     from grits_lab.spillage.predictor_config import PredictorModelConfig
 
     try:
-        stored = with_chunk_key(read_checkpoint(paths[spec.predictor])["config"]["model"])  # either name of the key
+        stored = read_checkpoint(paths[spec.predictor])["config"]["model"]  # read_checkpoint refuses a retired key name
         chunk = int(stored.get(CHUNK_KEY, PredictorModelConfig.n_action_steps))  # the default, for a config stored without it
     except StorageError:
         raise ConfigError(f"`checkpoints.{spec.predictor}` is not a spillage predictor checkpoint: {paths[spec.predictor]}") from None
