@@ -313,6 +313,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         "scoop_stop_reason": scoop["stop_reason"],
         "ik_failures": int(m["ik_failures"]),
         "scoop_max_joint_speed_ratio": float(m["max_joint_speed_ratio"]),
+        "scoop_arm_contact_steps": int(m["arm_contact_steps"]),
         "above_spoon_rim": int(m["above_spoon_rim"]),
         "n_plans": scoop["n_plans"],
         "plan_time_mean_s": scoop["plan_time_mean_s"],
@@ -324,7 +325,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
     record.update({"target_locate_error_m": math.nan, "target_fit_residual_m": math.nan, "spilled_transfer": 0,
                    "transfer_ik_failures": 0, "transfer_max_joint_step_rad": math.nan, "transfer_max_joint_speed_ratio": math.nan,
                    "transfer_plan": "", "transfer_reachable": None, "transfer_checks": 0, "pour_steps": 0,
-                   "carry_peak_speed_mps": math.nan, "carry_peak_accel_mps2": math.nan})
+                   "carry_peak_speed_mps": math.nan, "carry_peak_accel_mps2": math.nan, "transfer_arm_contact_steps": 0})
     if config.transfer.enabled and m["scooped"] > 0:
         t0 = time.perf_counter()
         tr = run_transfer(env, scene, config.transfer)
@@ -337,7 +338,8 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
                        "transfer_ik_failures": tr["ik_failures"], "transfer_max_joint_step_rad": tr["max_joint_step_rad"],
                        "transfer_max_joint_speed_ratio": tr["max_joint_speed_ratio"], "pour_steps": tr["pour_steps"],
                        "transfer_plan": tr["plan"], "transfer_reachable": tr["reachable"], "transfer_checks": tr["checks"],
-                       "carry_peak_speed_mps": tr["carry_peak_speed_mps"], "carry_peak_accel_mps2": tr["carry_peak_accel_mps2"]})
+                       "carry_peak_speed_mps": tr["carry_peak_speed_mps"], "carry_peak_accel_mps2": tr["carry_peak_accel_mps2"],
+                       "transfer_arm_contact_steps": int(final["arm_contact_steps"]) - int(m["arm_contact_steps"])})
     needed = 1 if env.food.success_rule == "items" else max(1, math.ceil(0.5 * int(m["scooped"])))
     record.update({
         "transferred": transferred,

@@ -180,7 +180,8 @@ def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
 def pour_motion(pose: np.ndarray, angle_deg: float, steps: int, profile: str = "constant") -> np.ndarray:
     """(steps, 9) roll the spoon about its own x axis by `angle_deg`, in place, in `steps` actions
     (profile: "constant" equal increments, "min_jerk" from rest to rest, `min_jerk`). A positive
-    angle raises the spoon's +y side: the food leaves over its -y lip."""
+    angle raises the spoon's +y side: the food leaves over its -y lip. The hand, 11 cm above the
+    spoon's bowl on the steep handle, swings down beside it: 6 cm below the bowl at 120 degrees."""
     rot = rot6d_to_matrix(np.asarray(pose[3:9], dtype=np.float64))
     out = []
     for f in profile_fractions(steps, profile):
@@ -285,8 +286,9 @@ def option_motion(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
                          settings.profile, lip_offset)
     pour = pour_motion(path[-1], settings.pour_angle_deg, settings.pour_steps, settings.profile)
     lift = lift_length(path)
-    stages = ["lift"] * lift + ["carry"] * (len(path) - lift) + ["pour"] * len(pour)
-    return np.concatenate([path, pour]), stages
+    hold = np.repeat(path[lift - 1 : lift], settings.lift_hold_steps, axis=0)  # the lifted spoon held still
+    stages = ["lift"] * (lift + len(hold)) + ["carry"] * (len(path) - lift) + ["pour"] * len(pour)
+    return np.concatenate([path[:lift], hold, path[lift:], pour]), stages
 
 
 def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], settings: Any, max_step: float,
@@ -325,6 +327,8 @@ def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[O
             bad = answer.joint_steps > settings.max_joint_step
             key_step = max(float(answer.joint_steps.max()), settings.max_joint_step)
         unreachable = answer.unreachable.copy()
+        if settings.avoid_arm_contact and answer.touches is not None:  # an arm that would strike the table or a bowl
+            unreachable |= answer.touches
         unreachable[0] = False
         bad = bad | unreachable
         plan = TransferPlan(actions, stages, option, not bad.any(), n_checks)

@@ -25,9 +25,12 @@ from grits_lab.sim.foods import FoodSpec, level_count, load_foods, sample_partic
 from grits_lab.sim.spill_metrics import COVERAGE_THRESHOLD, SpillTracker, above_spoon_rim, classify, fill_height, spoon_coverage
 from grits_lab.sim.robot import REST_POSE, PandaKinematics, joint_speed_ratio, pose_to_matrix, spoon_in_hand
 from grits_lab.sim.shapes import TARGET_BOWL, BowlGeometry, SpoonGeometry
-from grits_lab.sim.world import World, build_world, settle
+from grits_lab.sim.world import World, build_static_scene, build_world, settle
 
 DEFAULT_FOOD = "mung_beans"
+# Metres the arm's links keep from the table and the bowls on a checked path (`check_path`): a
+# planned motion that brings the arm closer touches them once it lags its command.
+ARM_CLEARANCE = 0.005
 
 
 @dataclass(frozen=True)
@@ -40,6 +43,8 @@ class PathCheck:
     joint_steps: np.ndarray
     joints: np.ndarray
     speed_ratios: np.ndarray  # (T,) the largest joint step over that joint's Panda limit per action (> 1: too fast)
+    # (T,) the arm (not the spoon) within ARM_CLEARANCE of the table or a bowl at the action's end
+    touches: np.ndarray | None = None
 
     @property
     def n_checked(self) -> int:
@@ -184,6 +189,8 @@ class ScoopEnv:
             (cx, cy), (sx, sy) = self.config.target_workspace_center, self.config.target_workspace_size
             target_xy = (cx + layout.uniform(-sx / 2, sx / 2), cy + layout.uniform(-sy / 2, sy / 2))
         self.world = build_world(self.config, components, rng, target_xy=tuple(target_xy), joints=joints)
+        table, source_bowl, target_bowl = build_static_scene(self.kinematics.client, self.config, tuple(target_xy))
+        self.kinematics.set_obstacles(table, source_bowl + target_bowl)
         self.world.command_joints(joints)
         self._joint_target = joints.copy()
         self._pose_target = self.world.spoon_matrix()
@@ -192,6 +199,7 @@ class ScoopEnv:
         self.step_count = 0
         self.ik_failures = 0
         self.max_joint_speed_ratio = 0.0
+        self.arm_contact_steps = 0
         self.rest_pull = True
         counts = self._classify()
         self._refuse_unsettled(counts.outside_source)
@@ -228,11 +236,10 @@ class ScoopEnv:
         failed = False
         done = 0
         for k, joints, reached in self._track(start, target, self._joint_target):
-            self._joint_target = joints
             failed |= not reached
-            world.command_joints(self._joint_target)
             n = (steps * (k + 1)) // pieces - done
-            world.step(n)
+            self._follow(world, self._joint_target, joints, n)
+            self._joint_target = joints
             done += n
         self._pose_target = target
         self.step_count += 1
@@ -241,11 +248,26 @@ class ScoopEnv:
         joint_step = float(np.abs(delta).max())
         speed_ratio = joint_speed_ratio(delta, cfg.control_hz)
         self.max_joint_speed_ratio = max(self.max_joint_speed_ratio, speed_ratio)
+        self.arm_contact_steps += int(world.arm_touches_static())
         before = self.tracker.history[-1] if self.tracker.history else 0
         spilled = self.tracker.update(self._classify(), thrown=speed_ratio > 1.0)
         truncated = self.step_count >= cfg.max_episode_steps
         return self._obs(), -float(spilled - before), False, truncated, self._info(ik_failure=failed, joint_step=joint_step,
                                                                                   joint_speed_ratio=speed_ratio)
+
+    def _follow(self, world: World, previous: np.ndarray, joints: np.ndarray, n: int) -> None:
+        """Move the arm's joint targets from `previous` to `joints` (7,) over `n` physics steps, as
+        `SimConfig.joint_command` says."""
+        if n <= 0:
+            return
+        if self.config.joint_command == "stepwise":
+            world.command_joints(joints)
+            world.step(n)
+            return
+        velocity = (joints - previous) / (n * self.config.time_step)
+        for i in range(1, n + 1):
+            world.command_joints(previous + (joints - previous) * (i / n), velocity)
+            world.step(1)
 
     def set_stage(self, stage: str, rest_pull: bool | None = None) -> None:
         """Name the task stage the next actions belong to (scoop, lift, carry, pour, after_pour): every
@@ -283,7 +305,7 @@ class ScoopEnv:
         """
         self._require_world()
         joints, start = self._joint_target.copy(), self._pose_target
-        unreachable, steps, ratios = [], [], []
+        unreachable, steps, ratios, touches = [], [], [], []
         for action in np.asarray(path, dtype=np.float64).reshape(-1, 9):
             target = pose9_to_matrix(action)
             before, failed = joints, False
@@ -293,7 +315,9 @@ class ScoopEnv:
             unreachable.append(failed)
             steps.append(float(np.abs(joints - before).max()))
             ratios.append(joint_speed_ratio(joints - before, self.config.control_hz))
-        return PathCheck(np.array(unreachable, dtype=bool), np.array(steps), joints, np.array(ratios))
+            touches.append(self.kinematics.touches_obstacles(joints, ARM_CLEARANCE))
+        return PathCheck(np.array(unreachable, dtype=bool), np.array(steps), joints, np.array(ratios),
+                         np.array(touches, dtype=bool))
 
     @staticmethod
     def _far_at_rest(world: World, a: np.ndarray, b: np.ndarray, distance: float) -> np.ndarray:
@@ -383,6 +407,7 @@ class ScoopEnv:
             "above_spoon_rim": int((counts.lifted & above_spoon_rim(positions, spoon, self.spoon_geometry)).sum()),
             "ik_failures": self.ik_failures,
             "max_joint_speed_ratio": self.max_joint_speed_ratio,
+            "arm_contact_steps": self.arm_contact_steps,  # actions that ended with the arm touching the table or a bowl
         }
 
     # ---- internals ---------------------------------------------------------------------------

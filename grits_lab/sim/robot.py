@@ -82,6 +82,22 @@ class PandaKinematics:
         self.ranges = [u - l for l, u in zip(self.lower, self.upper)]
         self.rest = list(REST_POSE) + [0.006, 0.006]
 
+    def set_obstacles(self, table: int, others: list[int]) -> None:
+        """Static bodies already built in `self.client` that the arm must not touch; the previous
+        ones are removed. The table is touched by the base and shoulder (links 0-1) by design."""
+        for body in getattr(self, "_obstacles", []):
+            self.client.removeBody(body)
+        self._table, self._obstacles = table, [table, *others]
+
+    def touches_obstacles(self, joints: np.ndarray, margin: float) -> bool:
+        """Whether the arm at joints (7,) comes within `margin` metres of an obstacle (`set_obstacles`)."""
+        self.set_joints(joints)
+        for body in getattr(self, "_obstacles", []):
+            for point in self.client.getClosestPoints(self.robot, body, margin):
+                if body != self._table or point[3] > 1:
+                    return True
+        return False
+
     def set_joints(self, joints: np.ndarray) -> None:
         for j, q in zip(ARM_JOINTS, joints):
             self.client.resetJointState(self.robot, j, float(q))

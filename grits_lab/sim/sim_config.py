@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 from grits_lab.config import require
 
@@ -62,6 +63,14 @@ class SimConfig:
     freeze_distance: float | None = None
     control_hz: float = 10.0  # rate of the 9-D pose actions
     ik_per_action: int = 4  # IK solves per action on the interpolated pose path
+    # How the arm's joint motors follow the IK solutions. "interpolated": at every physics step the
+    # motors get the joint targets on the straight line between two solutions and that line's
+    # velocity, as a robot's motion generator streams them (libfranka at 1 kHz); the spoon then
+    # moves with the commanded path's own accelerations. "stepwise" (scoop-v4 and earlier): each
+    # solution is held for its physics steps with a zero velocity target, so the arm lurches to each
+    # one and stops; measured on the expert's carry (commanded peak 0.2 m/s^2), the spoon's
+    # acceleration was 1.1 m/s^2 median and up to 9 m/s^2, which shook loose food off the spoon.
+    joint_command: Literal["interpolated", "stepwise"] = "interpolated"
     ik_position_tolerance: float = 0.01  # metres; larger IK residuals count as IK failures
     ik_orientation_tolerance: float = 0.15  # radians
     # Settling before an episode: run at least settle_min_s, stop when every particle is slower

@@ -85,11 +85,23 @@ class World:
     def joint_positions(self) -> np.ndarray:
         return np.array([s[0] for s in self.client.getJointStates(self.robot, list(ARM_JOINTS))])
 
-    def command_joints(self, joints: np.ndarray) -> None:
+    def command_joints(self, joints: np.ndarray, velocities: np.ndarray | None = None) -> None:
+        """Joint position targets (7,) rad for the arm's motors, with velocity targets (7,) rad/s
+        (None: zero, the motors brake towards the target)."""
         self.client.setJointMotorControlArray(
             self.robot, list(ARM_JOINTS), pb.POSITION_CONTROL, targetPositions=[float(q) for q in joints],
+            targetVelocities=[0.0] * 7 if velocities is None else [float(v) for v in velocities],
             forces=list(ARM_FORCES), positionGains=[0.3] * 7,
         )
+
+    def arm_touches_static(self) -> bool:
+        """Whether an arm link (the spoon excluded) is in contact with the table or a bowl now; the
+        base and shoulder (links 0-1) stand on the table by design."""
+        for body in [self.table, *self.source_bowl, *self.target_bowl]:
+            for point in self.client.getContactPoints(self.robot, body):
+                if body != self.table or point[3] > 1:
+                    return True
+        return False
 
     def freeze(self, mask: np.ndarray) -> None:
         """Make the particles of `mask` (N,) static (mass 0, at rest where they are) and the rest dynamic again."""
@@ -215,6 +227,21 @@ def pack_in_bowl(components: list[SampledParticles], bowl: BowlGeometry, centre:
     return positions + centre, comp_index
 
 
+def build_static_scene(client: BulletClient, config: SimConfig, target_xy: tuple[float, float]) -> tuple[int, list[int], list[int]]:
+    """The table, the source bowl's and the target bowl's bodies (static) in `client`: the world's
+    own, and the same obstacles on the arm's kinematic copy, where paths are checked against them."""
+    table = client.createMultiBody(
+        0, client.createCollisionShape(pb.GEOM_BOX, halfExtents=TABLE_HALF),
+        client.createVisualShape(pb.GEOM_BOX, halfExtents=TABLE_HALF, rgbaColor=[0.6, 0.45, 0.3, 1]),
+        basePosition=TABLE_CENTER,
+    )
+    src_pos = np.array([config.source_bowl_xy[0], config.source_bowl_xy[1], 0.0])
+    source_bowl = create_static_boxes(client, bowl_boxes(BowlGeometry()), src_pos, BOWL_COLOR)
+    tgt_pos = np.array([target_xy[0], target_xy[1], 0.0])
+    target_bowl = create_static_boxes(client, bowl_boxes(TARGET_BOWL), tgt_pos, TARGET_COLOR)
+    return table, source_bowl, target_bowl
+
+
 def build_world(config: SimConfig, components: list[SampledParticles], rng: np.random.Generator,
                 target_xy: tuple[float, float], joints: np.ndarray | None = None) -> World:
     """Create the client and every body; the arm starts at `joints` (7,), particles still unsettled."""
@@ -226,16 +253,10 @@ def build_world(config: SimConfig, components: list[SampledParticles], rng: np.r
     )
     client.setGravity(0, 0, -9.81)
 
-    table = client.createMultiBody(
-        0, client.createCollisionShape(pb.GEOM_BOX, halfExtents=TABLE_HALF),
-        client.createVisualShape(pb.GEOM_BOX, halfExtents=TABLE_HALF, rgbaColor=[0.6, 0.45, 0.3, 1]),
-        basePosition=TABLE_CENTER,
-    )
+    table, source_bowl, target_bowl = build_static_scene(client, config, target_xy)
     source_geometry, target_geometry, spoon_geometry = BowlGeometry(), TARGET_BOWL, SpoonGeometry()
     src_pos = np.array([config.source_bowl_xy[0], config.source_bowl_xy[1], 0.0])
-    source_bowl = create_static_boxes(client, bowl_boxes(source_geometry), src_pos, BOWL_COLOR)
     tgt_pos = np.array([target_xy[0], target_xy[1], 0.0])
-    target_bowl = create_static_boxes(client, bowl_boxes(target_geometry), tgt_pos, TARGET_COLOR)
 
     robot = client.loadURDF(PANDA_URDF, [0, 0, 0], useFixedBase=True)
     if joints is not None:

@@ -255,3 +255,39 @@ def test_when_no_option_passes_the_arm_holds_the_spoon_instead_of_running_a_moti
     assert out["transfer_steps"] == settings.settle_steps and out["pour_steps"] == 0 and out["ik_failures"] == 0
     assert np.linalg.norm(env.spoon_pose()[:3, 3] - before[:3, 3]) < 0.005
     assert out["max_joint_speed_ratio"] <= 1.0
+
+
+def test_a_lift_hold_keeps_the_lifted_spoon_still_over_the_source_bowl_before_the_carry():
+    from grits_lab.evaluation.transfer import BowlEstimate, TransferOption, lift_length, option_motion
+    from grits_lab.task.transfer_settings import TransferSettings
+
+    start = np.array([0.6, -0.1, 0.06, 1, 0, 0, 0, 1, 0], dtype=np.float32)
+    target = BowlEstimate(np.array([0.45, 0.3, 0.0]), 0.058, 0.045, 100, 0.0)
+    option = TransferOption(10, 0.0, 0.005, 0.0)
+    plain, plain_stages = option_motion(start, target, [], TransferSettings(), 0.012, 0.036, None, option)
+    held, held_stages = option_motion(start, target, [], TransferSettings(lift_hold_steps=7), 0.012, 0.036, None, option)
+    lift = lift_length(plain)
+    assert len(held) == len(plain) + 7 and held_stages.count("lift") == plain_stages.count("lift") + 7
+    np.testing.assert_array_equal(held[lift : lift + 7], np.repeat(plain[lift - 1 : lift], 7, axis=0))  # still, at the lift's top
+    np.testing.assert_array_equal(held[lift + 7 :], plain[lift:])  # then the same carry and pour
+    assert held_stages[lift + 7] == "carry"
+
+
+def test_an_arm_that_would_touch_the_table_fails_the_option_only_when_asked():
+    from types import SimpleNamespace
+
+    from grits_lab.evaluation.transfer import BowlEstimate, choose_transfer
+    from grits_lab.task.transfer_settings import TransferSettings
+
+    start = np.array([0.6, -0.1, 0.06, 1, 0, 0, 0, 1, 0], dtype=np.float32)
+    target = BowlEstimate(np.array([0.45, 0.3, 0.0]), 0.058, 0.045, 100, 0.0)
+
+    def check(actions):  # within the limits and reachable, but the arm meets the table in the last 5 actions
+        n = len(actions)
+        return SimpleNamespace(unreachable=np.zeros(n, bool), joint_steps=np.full(n, 0.05), speed_ratios=np.full(n, 0.2),
+                               touches=np.arange(n) >= n - 5)
+
+    allowed = choose_transfer(start, target, [], TransferSettings(), 0.012, 0.036, None, check)
+    avoided = choose_transfer(start, target, [], TransferSettings(avoid_arm_contact=True, max_checks=3), 0.012, 0.036, None, check)
+    assert allowed.reachable and allowed.n_checks == 1
+    assert not avoided.reachable and avoided.n_checks == 3  # every option touches: none passes
