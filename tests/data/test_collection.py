@@ -1,5 +1,7 @@
 """Real collection on the simulator: episode contents, clouds where objects are, resume == uninterrupted."""
 
+import zipfile
+
 import numpy as np
 import pytest
 
@@ -168,7 +170,10 @@ def test_damaged_episode_file_is_reported_and_regenerated(tmp_path, capsys):
     original = {p.name: read_episode(p) for p in files}
     victim = files[0]
     data = bytearray(victim.read_bytes())
-    middle = len(data) // 2  # inside an array's compressed bytes: the metadata still reads
+    with zipfile.ZipFile(victim) as archive:  # the largest array: its compressed bytes, not a header
+        largest = max(archive.infolist(), key=lambda info: info.compress_size)
+    start = largest.header_offset + 30 + len(largest.filename.encode()) + len(largest.extra)
+    middle = start + largest.compress_size // 2  # inside an array's compressed bytes: the metadata still reads
     data[middle:middle + 16] = bytes(16)
     victim.write_bytes(bytes(data))
     summary = run_collection(config, progress=False)

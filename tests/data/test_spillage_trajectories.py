@@ -105,8 +105,9 @@ def _run_candidate(tilt_deg: float) -> dict:
 def test_a_level_exit_keeps_the_food_and_a_tipped_exit_spills_it():
     level, tipped = _run_candidate(0.0), _run_candidate(45.0)
     assert level["ik_failures"] == 0 and tipped["ik_failures"] == 0  # the spoon really goes where the trial says
-    # A heaped spoon may shed a grain or two on a level exit; rolled 45 degrees it sheds its load.
-    assert level["scooped"] >= 5 and level["spilled"] <= 2
+    # A heaped spoon may shed a few grains off its top on a level exit at 0.4 m/s (at most a tenth of
+    # its load); rolled 45 degrees it sheds its load.
+    assert level["scooped"] >= 5 and level["spilled"] <= level["scooped"] // 10
     assert tipped["spilled"] >= level["spilled"] + 5 and tipped["label"] == 1
 
 

@@ -306,8 +306,9 @@ def test_records_of_two_protocols_are_labelled_with_their_protocol_and_never_poo
     # The same episodes (the same run_id and seeds) under two protocols: a before/after comparison.
     pd.DataFrame([episode("dp", "sago", "low", t, "success" if t < 1 else "spill", run_id="evaluate", protocol="scoop-v3")
                   for t in range(4)]).to_parquet(before / "episodes.parquet", index=False)
-    pd.DataFrame([episode("dp", "sago", "low", t, "success", run_id="evaluate") for t in range(4)]
-                 + [episode("grits", "sago", "low", t, "success", run_id="evaluate") for t in range(4)]).to_parquet(now / "episodes.parquet", index=False)
+    pd.DataFrame([episode("dp", "sago", "low", t, "success", run_id="evaluate", protocol="scoop-v4") for t in range(4)]
+                 + [episode("grits", "sago", "low", t, "success", run_id="evaluate", protocol="scoop-v4") for t in range(4)]
+                 ).to_parquet(now / "episodes.parquet", index=False)
     assert main(["report", str(before), str(now), "--output-dir", str(out)]) == 0
     fig5 = pd.read_csv(out / "csv" / "fig5_overall.csv").set_index("variant")
     assert fig5.loc["dp[scoop-v3]", "task_success_k"] == 1 and fig5.loc["dp[scoop-v3]", "episodes"] == 4
