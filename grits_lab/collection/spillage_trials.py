@@ -460,7 +460,8 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
     # steps, then the carry's (the env's tracker holds one entry per step).
     until_delivery = np.asarray(env.tracker.history, dtype=np.int32)
     chunk_start, chunk_spilled = chunk_labels(until_delivery, p.n_action_steps, spilled_before, n_steps=len(spilled))
-    chunk_spilled_horizon = horizon_labels(until_delivery, chunk_start, spilled_before)
+    spill_steps = env.spill_steps()  # where each particle ended, once the load was delivered
+    chunk_spilled_horizon = horizon_labels(spill_steps, chunk_start)
     metrics = env.metrics()
     component = env.particle_parameters()[0] if count else {}
     arrays = {
@@ -471,6 +472,7 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "chunk_spilled_horizon": chunk_spilled_horizon.astype(bool),
         "spilled_over_time": np.asarray(spilled, dtype=np.int32),
         "spilled_until_delivery": until_delivery,
+        "spill_steps": spill_steps,
     }
     if p.raw_cloud:
         arrays["chunk_cloud_raw"] = np.stack(clouds_raw)[: len(chunk_start)]

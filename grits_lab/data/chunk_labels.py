@@ -1,10 +1,11 @@
-"""Spill labels of a spillage episode's chunks, from the spilled count after every step.
+"""Spill labels of a spillage episode's chunks.
 
 Two labels per chunk (docs/datasets.md, "Two labels"):
-- chunk (the paper's): did the spilled count rise while the chunk's own `n_action_steps` actions ran;
-- horizon: did food spill at any step from the chunk's first action until the load was delivered
-  (the rest of the scoop, the lift, the carry and the pour), so a dig that heaps the spoon is
-  blamed for the heap it sheds later.
+- chunk (the paper's): did the spilled count rise while the chunk's own `n_action_steps` actions
+  ran (from the spilled count after every step);
+- horizon: is food spilled once the load is delivered that left at or after the chunk's first
+  action (the rest of the scoop, the lift, the carry and the pour; from the step at which each
+  finally spilled particle left), so a dig that heaps the spoon is blamed for the heap it sheds later.
 """
 
 from __future__ import annotations
@@ -35,19 +36,20 @@ def chunk_labels(spilled_over_time: np.ndarray, n_action_steps: int, spilled_bef
     return starts, before[ends] > before[starts]
 
 
-def horizon_labels(spilled_until_delivery: np.ndarray, chunk_start: np.ndarray, spilled_before: int = 0) -> np.ndarray:
-    """(C,) bool: the spilled count rose at some step from each chunk's first step to the last one.
+def horizon_labels(spill_steps: np.ndarray, chunk_start: np.ndarray) -> np.ndarray:
+    """(C,) bool: a particle that is spilled when the load has been delivered left at or after each
+    chunk's first step.
 
-    spilled_until_delivery: (S,) the spilled count after every step from the episode's first
-    action until the load was delivered (scoop, lift, carry, pour and settling); chunk_start: (C,)
-    step indices into it; spilled_before: the count before the first step. A rise, not a net
-    gain: food that reaches the target bowl leaves the count, so the count can fall.
+    spill_steps: (K,) for each particle spilled at the end of the horizon (outside both bowls and
+    off the spoon once the scoop, lift, carry, pour and settling are over), the action step at
+    which it was last counted spilled (`SpillTracker.spill_steps`); chunk_start: (C,) step indices
+    of the same episode. Judged on where particles end, not on the spilled count's rises: food in
+    flight from the spoon to the target is outside both bowls for a few steps of every pour, and a
+    count that rises and falls back is delivered food, not a spill.
     """
-    counts = np.asarray(spilled_until_delivery, dtype=np.int64)
-    rises = np.diff(np.concatenate([[spilled_before], counts])) > 0  # rises[t]: step t spilled
-    # spill_from[t]: some step >= t spilled (a reversed running OR)
-    spill_from = np.concatenate([np.logical_or.accumulate(rises[::-1])[::-1], [False]])
-    starts = np.asarray(chunk_start, dtype=np.int64)
-    if len(starts) and (starts.min() < 0 or starts.max() >= max(len(counts), 1)):
-        raise ValueError(f"chunk starts {starts.tolist()} lie outside the {len(counts)} recorded steps")
-    return spill_from[starts].astype(bool)
+    steps = np.asarray(spill_steps, dtype=np.int64).reshape(-1)
+    starts = np.asarray(chunk_start, dtype=np.int64).reshape(-1)
+    if len(starts) and starts.min() < 0:
+        raise ValueError(f"chunk starts {starts.tolist()} must be non-negative step indices")
+    last = steps.max() if len(steps) else -1
+    return starts <= last

@@ -132,26 +132,27 @@ def rollout_chunk_episode(chunks: dict[str, Any], n_action_steps: int, meta: dic
     Arrays: trajectory (T, 9) executed actions; chunk_start (C,) int32; chunk_cloud (C, 3, N, 3)
     float16, the composite cloud when the chunk started; chunk_spilled (C,) bool, whether the
     spilled count rose while the chunk's `n_action_steps` actions ran; chunk_spilled_horizon (C,)
-    bool, whether food spilled from the chunk's first action until the end of the task (the rest of
-    the scoop, the transfer and the pour: `chunks["spilled_until_delivery"]`, the count after every
-    step of the episode, when the caller recorded it; else until the scoop's end). Only whole chunks
-    are kept (the predictor judges `n_action_steps` actions); labels come from the simulation's particle states.
+    bool, whether food spilled at the end of the task left at or after the chunk's first action
+    (`chunks["spill_steps"]`, the step at which each particle spilled at the end left, recorded
+    after the transfer and pour; else after the scoop). Only whole chunks are kept (the predictor
+    judges `n_action_steps` actions); labels come from the simulation's particle states.
     """
     from grits_lab.data.chunk_labels import horizon_labels
 
     actions = np.asarray(chunks["actions"], dtype=np.float32).reshape(-1, 9)
     spilled = np.asarray(chunks["spilled_over_time"], dtype=np.int64)
     until_delivery = np.asarray(chunks.get("spilled_until_delivery", spilled), dtype=np.int64)
-    starts, clouds, labels, horizon = [], [], [], []
+    spill_steps = np.asarray(chunks["spill_steps"], dtype=np.int32)
+    starts, clouds, labels = [], [], []
     for start, cloud, before in chunks["log"]:
         if start + n_action_steps > len(actions):
             continue
         starts.append(start)
         clouds.append(np.asarray(cloud, dtype=np.float16))
         labels.append(bool(spilled[start + n_action_steps - 1] > before))
-        horizon.append(bool(horizon_labels(until_delivery[start:], [0], before)[0]))
     if not starts:
         return None
+    horizon = horizon_labels(spill_steps, np.asarray(starts)).tolist()
     arrays = {
         "trajectory": actions,
         "chunk_start": np.asarray(starts, dtype=np.int32),
@@ -160,6 +161,7 @@ def rollout_chunk_episode(chunks: dict[str, Any], n_action_steps: int, meta: dic
         "chunk_spilled_horizon": np.asarray(horizon, dtype=bool),
         "spilled_over_time": spilled[: len(actions)].astype(np.int32),
         "spilled_until_delivery": until_delivery.astype(np.int32),
+        "spill_steps": spill_steps,
     }
     return {"arrays": arrays, "meta": {**meta, "label": int(any(labels)), "label_horizon": int(any(horizon)),
                                        "n_action_steps": int(n_action_steps), "steps": int(len(actions)), "n_chunks": len(starts),
@@ -353,6 +355,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
     if record_chunks:
         n_exec = config.scoop.n_action_steps or getattr(controller, "n_action_steps", None) or 12
         scoop["chunks"]["spilled_until_delivery"] = list(env.tracker.history)  # through the transfer and pour
+        scoop["chunks"]["spill_steps"] = env.spill_steps()
         record["_chunks"] = rollout_chunk_episode(scoop["chunks"], int(n_exec), {
             "food": food, "level": level, "seed": int(seed), "shape": food, "spilled": int(m["spilled"]),
             "scooped": int(m["scooped"]), "scoop_success": bool(m["scoop_success"])})

@@ -382,6 +382,12 @@ class ScoopEnv:
         tops = np.array([p.radius for p in w.particle_components])[w.particle_component_index] if len(w.particles) else np.zeros(0)
         return fill_height(w.particle_positions(), tops, w.source_bowl_position, w.source_geometry)
 
+    def spill_steps(self) -> np.ndarray:
+        """(K,) int32: for each particle spilled now, the action step since `reset` at which it was
+        last counted spilled (`SpillTracker.spill_steps`); the horizon label's input."""
+        self._require_world()
+        return self.tracker.spill_steps(self._classify())
+
     def metrics(self) -> dict[str, Any]:
         """Scoop metrics of the current state (counts of particles; see grits_lab.sim.spill_metrics)."""
         w = self._require_world()

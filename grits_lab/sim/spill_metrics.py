@@ -145,6 +145,7 @@ class SpillTracker:
         self.spilled_flags = np.zeros(n_particles, dtype=bool)
         self.stage_index = np.full(n_particles, -1, dtype=np.int8)  # into SPILL_STAGES, -1 not spilled
         self.cause_index = np.full(n_particles, -1, dtype=np.int8)  # into SPILL_CAUSES
+        self.spill_step = np.full(n_particles, -1, dtype=np.int32)  # the update (action step) that last counted it spilled
         self.history: list[int] = []
         self.first_spill_step = -1
         self.stage = SPILL_STAGES[0]
@@ -177,6 +178,7 @@ class SpillTracker:
                              np.where(self._was_in_target[new], SPILL_CAUSES.index("bounced_out"), SPILL_CAUSES.index(from_spoon)))
             self.cause_index[new] = cause
             self.stage_index[new] = stage
+            self.spill_step[new] = len(self.history)
         self.spilled_flags |= now
         self.spilled_flags &= ~counts.in_target  # food that reached the target bowl is delivered
         self.observe(counts)
@@ -188,6 +190,11 @@ class SpillTracker:
 
     def current(self, counts: ParticleCounts) -> int:
         return int((self.spilled_flags & ~counts.in_target).sum())
+
+    def spill_steps(self, counts: ParticleCounts) -> np.ndarray:
+        """(K,) int32: for each particle spilled now (not in the target bowl), the action step (index
+        into `history`) at which it was last counted spilled."""
+        return self.spill_step[self.spilled_flags & ~counts.in_target].astype(np.int32)
 
     def attribution(self, counts: ParticleCounts) -> dict[str, int]:
         """Spilled particles now (not in the target bowl) by stage and cause, keyed as `attribution_columns`."""
