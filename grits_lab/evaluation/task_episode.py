@@ -229,7 +229,8 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     max_step = settings.max_speed / env.config.control_hz
     # The robot's base stands at the world origin (grits_lab/sim/world.py): radial = away from it.
     heading = math.atan2(target.centre[1], target.centre[0]) if settings.heading == "radial" else None
-    check = (lambda actions: env.check_path(actions, rest_pull=settings.rest_pull)) if settings.reach_check else None
+    check = ((lambda actions: env.check_path(actions, rest_pull=settings.rest_pull, touches=settings.avoid_arm_contact))
+             if settings.reach_check else None)
     lip = spoon.half_width + spoon.wall_height * math.sin(math.radians(spoon.wall_slant_deg)) if settings.pour_lip_over_centre else 0.0
     plan = choose_transfer(current, target, obstacles, settings, max_step, reach, heading, check, lip)
     ik_failures, joint_steps, speed_ratios = 0, [0.0], [0.0]

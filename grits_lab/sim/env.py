@@ -43,7 +43,8 @@ class PathCheck:
     joint_steps: np.ndarray
     joints: np.ndarray
     speed_ratios: np.ndarray  # (T,) the largest joint step over that joint's Panda limit per action (> 1: too fast)
-    # (T,) the arm (not the spoon) within ARM_CLEARANCE of the table or a bowl at the action's end
+    # (T,) the arm (not the spoon) within ARM_CLEARANCE of the table or a bowl at the action's end;
+    # None when the check was not asked for it
     touches: np.ndarray | None = None
 
     @property
@@ -189,7 +190,8 @@ class ScoopEnv:
             (cx, cy), (sx, sy) = self.config.target_workspace_center, self.config.target_workspace_size
             target_xy = (cx + layout.uniform(-sx / 2, sx / 2), cy + layout.uniform(-sy / 2, sy / 2))
         self.world = build_world(self.config, components, rng, target_xy=tuple(target_xy), joints=joints)
-        table, source_bowl, target_bowl = build_static_scene(self.kinematics.client, self.config, tuple(target_xy))
+        table, source_bowl, target_bowl = build_static_scene(self.kinematics.client, self.world.source_bowl_position,
+                                                             self.world.target_bowl_position)
         self.kinematics.set_obstacles(table, source_bowl + target_bowl)
         self.world.command_joints(joints)
         self._joint_target = joints.copy()
@@ -296,16 +298,18 @@ class ScoopEnv:
                 joints = ik.joints
             yield k, joints, ik.ok
 
-    def check_path(self, path: np.ndarray, rest_pull: bool | None = None) -> PathCheck:
+    def check_path(self, path: np.ndarray, rest_pull: bool | None = None, touches: bool = False) -> PathCheck:
         """What the arm would do with the actions `path` (T, 9) from its present joint target, on the
         kinematic copy only (the world is not touched): the same IK tracking as `step` (with
         `rest_pull` as `_track`: None the current stage's; pass False for a motion of the stages
         after the scoop), so entry t is what `step(path[t])` would report as `ik_failure`,
-        `joint_step` and `joint_speed_ratio`. Raises RuntimeError before `reset`.
+        `joint_step` and `joint_speed_ratio`. With `touches`, also whether the arm comes within
+        ARM_CLEARANCE of the table or a bowl (`PathCheck.touches`; None without). Raises
+        RuntimeError before `reset`.
         """
         self._require_world()
         joints, start = self._joint_target.copy(), self._pose_target
-        unreachable, steps, ratios, touches = [], [], [], []
+        unreachable, steps, ratios, touching = [], [], [], []
         for action in np.asarray(path, dtype=np.float64).reshape(-1, 9):
             target = pose9_to_matrix(action)
             before, failed = joints, False
@@ -315,9 +319,10 @@ class ScoopEnv:
             unreachable.append(failed)
             steps.append(float(np.abs(joints - before).max()))
             ratios.append(joint_speed_ratio(joints - before, self.config.control_hz))
-            touches.append(self.kinematics.touches_obstacles(joints, ARM_CLEARANCE))
+            if touches:
+                touching.append(self.kinematics.touches_obstacles(joints, ARM_CLEARANCE))
         return PathCheck(np.array(unreachable, dtype=bool), np.array(steps), joints, np.array(ratios),
-                         np.array(touches, dtype=bool))
+                         np.array(touching, dtype=bool) if touches else None)
 
     @staticmethod
     def _far_at_rest(world: World, a: np.ndarray, b: np.ndarray, distance: float) -> np.ndarray:

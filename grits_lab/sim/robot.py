@@ -25,6 +25,8 @@ ARM_JOINTS = tuple(range(7))
 FINGER_JOINTS = (9, 10)
 GRASP_LINK = 11  # panda_grasptarget
 ARM_FORCES = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
+# Links -1 (base) to this one stand on the table by design: neither a collision nor a contact of the arm.
+LAST_LINK_ON_TABLE = 1
 # The Panda's joint velocity limits, rad/s (Franka Control Interface documentation, "Robot and
 # interface specifications", limits in joint space: q_dot_max).
 PANDA_MAX_JOINT_VELOCITY = (2.1750, 2.1750, 2.1750, 2.1750, 2.6100, 2.6100, 2.6100)
@@ -81,20 +83,21 @@ class PandaKinematics:
                 self.upper.append(info[9])
         self.ranges = [u - l for l, u in zip(self.lower, self.upper)]
         self.rest = list(REST_POSE) + [0.006, 0.006]
+        self._table, self._obstacles = -1, []  # static bodies the arm must not touch (`set_obstacles`)
 
     def set_obstacles(self, table: int, others: list[int]) -> None:
         """Static bodies already built in `self.client` that the arm must not touch; the previous
-        ones are removed. The table is touched by the base and shoulder (links 0-1) by design."""
-        for body in getattr(self, "_obstacles", []):
+        ones are removed. The table is touched by the links up to LAST_LINK_ON_TABLE by design."""
+        for body in self._obstacles:
             self.client.removeBody(body)
         self._table, self._obstacles = table, [table, *others]
 
     def touches_obstacles(self, joints: np.ndarray, margin: float) -> bool:
         """Whether the arm at joints (7,) comes within `margin` metres of an obstacle (`set_obstacles`)."""
         self.set_joints(joints)
-        for body in getattr(self, "_obstacles", []):
+        for body in self._obstacles:
             for point in self.client.getClosestPoints(self.robot, body, margin):
-                if body != self._table or point[3] > 1:
+                if body != self._table or point[3] > LAST_LINK_ON_TABLE:
                     return True
         return False
 

@@ -23,6 +23,7 @@ from grits_lab.sim.robot import (
     ARM_FORCES,
     ARM_JOINTS,
     FINGER_JOINTS,
+    LAST_LINK_ON_TABLE,
     GRASP_LINK,
     PANDA_URDF,
     matrix_to_pose,
@@ -96,10 +97,10 @@ class World:
 
     def arm_touches_static(self) -> bool:
         """Whether an arm link (the spoon excluded) is in contact with the table or a bowl now; the
-        base and shoulder (links 0-1) stand on the table by design."""
+        links up to LAST_LINK_ON_TABLE stand on the table by design."""
         for body in [self.table, *self.source_bowl, *self.target_bowl]:
             for point in self.client.getContactPoints(self.robot, body):
-                if body != self.table or point[3] > 1:
+                if body != self.table or point[3] > LAST_LINK_ON_TABLE:
                     return True
         return False
 
@@ -227,18 +228,17 @@ def pack_in_bowl(components: list[SampledParticles], bowl: BowlGeometry, centre:
     return positions + centre, comp_index
 
 
-def build_static_scene(client: BulletClient, config: SimConfig, target_xy: tuple[float, float]) -> tuple[int, list[int], list[int]]:
-    """The table, the source bowl's and the target bowl's bodies (static) in `client`: the world's
-    own, and the same obstacles on the arm's kinematic copy, where paths are checked against them."""
+def build_static_scene(client: BulletClient, source_position: np.ndarray, target_position: np.ndarray) -> tuple[int, list[int], list[int]]:
+    """The table, the source bowl's and the target bowl's bodies (static) in `client`, the bowls at
+    (3,) positions: the world's own, and the same obstacles on the arm's kinematic copy, where paths
+    are checked against them."""
     table = client.createMultiBody(
         0, client.createCollisionShape(pb.GEOM_BOX, halfExtents=TABLE_HALF),
         client.createVisualShape(pb.GEOM_BOX, halfExtents=TABLE_HALF, rgbaColor=[0.6, 0.45, 0.3, 1]),
         basePosition=TABLE_CENTER,
     )
-    src_pos = np.array([config.source_bowl_xy[0], config.source_bowl_xy[1], 0.0])
-    source_bowl = create_static_boxes(client, bowl_boxes(BowlGeometry()), src_pos, BOWL_COLOR)
-    tgt_pos = np.array([target_xy[0], target_xy[1], 0.0])
-    target_bowl = create_static_boxes(client, bowl_boxes(TARGET_BOWL), tgt_pos, TARGET_COLOR)
+    source_bowl = create_static_boxes(client, bowl_boxes(BowlGeometry()), source_position, BOWL_COLOR)
+    target_bowl = create_static_boxes(client, bowl_boxes(TARGET_BOWL), target_position, TARGET_COLOR)
     return table, source_bowl, target_bowl
 
 
@@ -253,10 +253,10 @@ def build_world(config: SimConfig, components: list[SampledParticles], rng: np.r
     )
     client.setGravity(0, 0, -9.81)
 
-    table, source_bowl, target_bowl = build_static_scene(client, config, target_xy)
     source_geometry, target_geometry, spoon_geometry = BowlGeometry(), TARGET_BOWL, SpoonGeometry()
     src_pos = np.array([config.source_bowl_xy[0], config.source_bowl_xy[1], 0.0])
     tgt_pos = np.array([target_xy[0], target_xy[1], 0.0])
+    table, source_bowl, target_bowl = build_static_scene(client, src_pos, tgt_pos)
 
     robot = client.loadURDF(PANDA_URDF, [0, 0, 0], useFixedBase=True)
     if joints is not None:
@@ -281,7 +281,7 @@ def build_world(config: SimConfig, components: list[SampledParticles], rng: np.r
     client.changeConstraint(cid, maxForce=2000)
     for link in range(-1, client.getNumJoints(robot)):
         client.setCollisionFilterPair(robot, spoon, link, -1, 0)
-        client.setCollisionFilterPair(robot, table, link, -1, 0 if link <= 1 else 1)
+        client.setCollisionFilterPair(robot, table, link, -1, 0 if link <= LAST_LINK_ON_TABLE else 1)
 
     ids, comp_of, masses = [], [], []
     positions, comp_index = pack_in_bowl(components, source_geometry, src_pos, rng)

@@ -69,6 +69,7 @@ def test_a_path_through_the_table_is_foreseen_on_the_kinematic_copy(env):
     start = matrix_to_pose9(env.spoon_pose())
     low = start.copy()
     low[2] = -0.2  # the spoon's frame 20 cm below the table's top: the hand holding it is in the table
-    check = env.check_path(np.linspace(start, low, 8))
+    assert env.check_path(np.linspace(start, low, 8)).touches is None  # only checked when asked
+    check = env.check_path(np.linspace(start, low, 8), touches=True)
     assert not check.unreachable.any()  # the arm can reach it; only the table is in the way
     assert not check.touches[0] and check.touches[-1]
