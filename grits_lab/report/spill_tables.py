@@ -15,7 +15,7 @@ import pandas as pd
 from grits_lab.intervals import format_rate, rate
 from grits_lab.report.tables import ReportTable, all_variants
 from grits_lab.report.vocabulary import LEVEL_ORDER, food_display
-from grits_lab.sim.spill_metrics import SPILL_CAUSES, SPILL_STAGES, attribution_columns
+from grits_lab.sim.spill_metrics import SPILL_CAUSES, SPILL_STAGES, attribution_columns, stage_columns
 
 CAUSE_NAMES = {
     "over_rim": "Over the source rim",
@@ -48,6 +48,18 @@ def spilled_after_scoop(rows: pd.DataFrame) -> pd.Series:
     return counts[[c for c, (stage, _) in attribution_columns().items() if stage in AFTER_SCOOP]].sum(axis=1)
 
 
+def lifted_episodes(rows: pd.DataFrame) -> pd.DataFrame:
+    """The episodes that lifted food (`scooped` > 0) and ended without an error."""
+    return rows[~rows["is_error"] & (pd.to_numeric(rows["scooped"], errors="coerce") > 0)]
+
+
+def delivered_share(rows: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
+    """(share of the lifted particles in the target bowl, delivered: at least DELIVERED_SHARE of
+    them and nothing spilled after the scoop), per episode of `rows` (`lifted_episodes`)."""
+    share = pd.to_numeric(rows["transferred"], errors="coerce") / pd.to_numeric(rows["scooped"], errors="coerce")
+    return share, (share >= DELIVERED_SHARE) & (spilled_after_scoop(rows) == 0)
+
+
 def spill_attribution_table(episodes: pd.DataFrame | None) -> ReportTable:
     """Method x stage rows, one column per cause: "episodes with that spill / particles".
 
@@ -68,10 +80,10 @@ def spill_attribution_table(episodes: pd.DataFrame | None) -> ReportTable:
                 data_rows.append({"method": rows["method"].iloc[0], "variant": variant, "method_name": name, "stage": stage,
                                   "cause": cause, "episodes_k": k, "episodes": n, "particles": particles})
                 cells[CAUSE_NAMES[cause]] = f"{k}/{n} ({particles})" if k else "0"
-            stage_columns = [f"spilled_{stage}_{c}" for c in SPILL_CAUSES]
-            if counts[stage_columns].to_numpy().sum() > 0:
+            columns = stage_columns(stage)
+            if counts[columns].to_numpy().sum() > 0:
                 display_rows.append({"Method": name, "Stage": STAGE_NAMES[stage], **cells,
-                                     "Any cause": f"{int((counts[stage_columns].sum(axis=1) > 0).sum())}/{n}"})
+                                     "Any cause": f"{int((counts[columns].sum(axis=1) > 0).sum())}/{n}"})
     notes = [
         "Each cell: episodes with at least one particle lost that way / episodes (particles in all). A particle "
         "counts once, in the stage it was first found outside every container and not in the target bowl.",
@@ -103,8 +115,7 @@ def delivery_table(episodes: pd.DataFrame | None) -> ReportTable:
               and {"scooped", "transferred"} <= set(episodes.columns))
     variants = all_variants(episodes) if usable else []
     for variant, name in variants:
-        rows = episodes[(episodes["variant"] == variant) & ~episodes["is_error"]]
-        rows = rows[pd.to_numeric(rows["scooped"], errors="coerce") > 0]
+        rows = lifted_episodes(episodes[episodes["variant"] == variant])
         groups = [("All foods", "", rows)]
         if len(variants) == 1:
             for (food, level), g in sorted(rows.groupby(["food", "level"]),
@@ -112,9 +123,8 @@ def delivery_table(episodes: pd.DataFrame | None) -> ReportTable:
                 groups.append((food_display(food, long=True), level, g))
         for food, level, g in groups:
             scooped = pd.to_numeric(g["scooped"], errors="coerce")
-            share = pd.to_numeric(g["transferred"], errors="coerce") / scooped
+            share, delivered = delivered_share(g)
             after = spilled_after_scoop(g)
-            delivered = (share >= DELIVERED_SHARE) & (after == 0)
             r = rate(int(delivered.sum()), len(g))
             heap = pd.to_numeric(g["above_spoon_rim"], errors="coerce") if "above_spoon_rim" in g.columns else None
             display_rows.append({"Method": name, "Food": food, "Level": level, "Episodes": str(len(g)),
@@ -156,14 +166,13 @@ def load_loss_figure(episodes: pd.DataFrame, path: Path) -> Path | None:
     fig, axes = plt.subplots(1, len(variants), figsize=(min(4.2 * len(variants), 12.5), 3.4), squeeze=False, sharey=True)
     colours = {"lift": "tab:orange", "carry": "tab:red", "pour": "tab:purple", "after_pour": "tab:brown"}
     for ax, (variant, name) in zip(axes[0], variants):
-        rows = episodes[(episodes["variant"] == variant) & ~episodes["is_error"]]
-        rows = rows[pd.to_numeric(rows["scooped"], errors="coerce") > 0]
+        rows = lifted_episodes(episodes[episodes["variant"] == variant])
         counts = attribution_counts(rows)
         heap = pd.to_numeric(rows["above_spoon_rim"], errors="coerce").to_numpy()
         lost = spilled_after_scoop(rows).to_numpy()
         ax.scatter(heap[lost == 0], lost[lost == 0], s=14, color="0.65", label="nothing lost")
         for stage, colour in colours.items():
-            by_stage = counts[[c for c, (st, _) in attribution_columns().items() if st == stage]].sum(axis=1).to_numpy()
+            by_stage = counts[stage_columns(stage)].sum(axis=1).to_numpy()
             if (by_stage > 0).any():
                 ax.scatter(heap[by_stage > 0], by_stage[by_stage > 0], s=18, color=colour, label=STAGE_NAMES[stage])
         ax.set_title(name, fontsize=9)

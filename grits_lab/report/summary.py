@@ -27,11 +27,11 @@ from grits_lab.intervals import rate
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
 from grits_lab.records import OUTCOME_COLUMNS
 from grits_lab.report.run_records import RunData
-from grits_lab.report.spill_tables import (AFTER_SCOOP, DELIVERED_SHARE, attribution_counts, has_attribution, spill_attribution_table,
-                                           spilled_after_scoop)
+from grits_lab.report.spill_tables import (AFTER_SCOOP, DELIVERED_SHARE, attribution_counts, delivered_share, has_attribution,
+                                           lifted_episodes, spill_attribution_table, spilled_after_scoop)
 from grits_lab.report.tables import all_variants, claims_table
 from grits_lab.report.vocabulary import MAIN_METHODS
-from grits_lab.sim.spill_metrics import SPILL_CAUSES
+from grits_lab.sim.spill_metrics import stage_columns
 from grits_lab.versions import git_commit
 
 SUMMARY_FILE = "summary.csv"
@@ -70,13 +70,11 @@ def summary_table(episodes: pd.DataFrame) -> pd.DataFrame:
             counts["spill_after_scoop"] = (int((spilled_after_scoop(group) > 0).sum()), len(group))
             by_cell = attribution_counts(group)
             for stage in AFTER_SCOOP:
-                lost = by_cell[[f"spilled_{stage}_{cause}" for cause in SPILL_CAUSES]].sum(axis=1) > 0
+                lost = by_cell[stage_columns(stage)].sum(axis=1) > 0
                 counts[f"spill_{stage}"] = (int(lost.sum()), len(group))
             if {"scooped", "transferred"} <= set(group.columns):
-                lifted = group[~group["is_error"] & (pd.to_numeric(group["scooped"], errors="coerce") > 0)]
-                share = pd.to_numeric(lifted["transferred"], errors="coerce") / pd.to_numeric(lifted["scooped"], errors="coerce")
-                delivered = (share >= DELIVERED_SHARE) & (spilled_after_scoop(lifted) == 0)
-                counts["delivered"] = (int(delivered.sum()), len(lifted))
+                lifted = lifted_episodes(group)
+                counts["delivered"] = (int(delivered_share(lifted)[1].sum()), len(lifted))
         if "transfer_reachable" in group.columns:
             checked = group["transfer_reachable"].map(lambda v: None if v is None or (isinstance(v, float) and math.isnan(v)) else bool(v))
             checked = checked[checked.notna()]

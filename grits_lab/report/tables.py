@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import pandas as pd
 
 from grits_lab.records import OUTCOME_COLUMNS
-from grits_lab.sim.spill_metrics import SPILL_STAGES, attribution_columns
+from grits_lab.sim.spill_metrics import SPILL_STAGES, attribution_columns, stage_columns
 from grits_lab.intervals import Rate, format_percent, format_rate, rate
 from grits_lab.report.vocabulary import (
     ABLATION_METHODS,
@@ -420,8 +420,7 @@ def failure_table(episodes: pd.DataFrame | None) -> ReportTable:
         if attributed:  # the transfer's spills split by the stage that lost them (episodes with a spill there)
             parts = []
             for stage in SPILL_STAGES[1:]:
-                columns = [c for c, (st, _) in attribution_columns().items() if st == stage]
-                lost = rows[columns].apply(pd.to_numeric, errors="coerce").fillna(0).sum(axis=1) > 0
+                lost = rows[stage_columns(stage)].apply(pd.to_numeric, errors="coerce").fillna(0).sum(axis=1) > 0
                 k = int((lost & ~rows["is_error"]).sum())
                 data[f"spill_{stage}_k"] = k
                 parts.append(f"{stage.replace('_', ' ')} {k}")

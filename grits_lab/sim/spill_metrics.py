@@ -124,6 +124,11 @@ def attribution_columns() -> dict[str, tuple[str, str]]:
     return {f"spilled_{stage}_{cause}": (stage, cause) for stage in SPILL_STAGES for cause in SPILL_CAUSES}
 
 
+def stage_columns(stage: str) -> list[str]:
+    """The record columns of one stage's counts, one per cause: `spilled_<stage>_<cause>`."""
+    return [f"spilled_{stage}_{cause}" for cause in SPILL_CAUSES]
+
+
 class SpillTracker:
     """Keeps the per-particle spilled flags, the spilled count after every action step, and for
     every spilled particle the stage and cause of its spill (docs/evaluation.md, "Where food is lost").
