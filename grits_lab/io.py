@@ -20,8 +20,10 @@ from grits_lab.errors import StorageError
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary path beside `path`; on success it replaces `path` in one rename."""
+def atomic_path(path: str | Path, mode: int | None = None) -> Iterator[Path]:
+    """Yield a temporary path beside `path`; on success it replaces `path` in one rename.
+
+    The file gets `mode`, or with None the mode an ordinary write would give it."""
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -34,7 +36,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         yield tmp_path
         # mkstemp creates 0600; give the file the mode an ordinary write would, so a group that
         # shares the results disk can read reports, records and checkpoints.
-        os.chmod(tmp_path, _ordinary_mode(path))
+        os.chmod(tmp_path, _ordinary_mode(path) if mode is None else mode)
         os.replace(tmp_path, path)
     except OSError as exc:
         raise StorageError(_describe(exc, path)) from None
@@ -43,16 +45,16 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
             tmp_path.unlink()
 
 
-def write_bytes_atomic(path: str | Path, data: bytes) -> None:
-    with atomic_path(path) as tmp:
+def write_bytes_atomic(path: str | Path, data: bytes, mode: int | None = None) -> None:
+    with atomic_path(path, mode) as tmp:
         with open(tmp, "wb") as fh:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
 
 
-def write_text_atomic(path: str | Path, text: str) -> None:
-    write_bytes_atomic(path, text.encode())
+def write_text_atomic(path: str | Path, text: str, mode: int | None = None) -> None:
+    write_bytes_atomic(path, text.encode(), mode)
 
 
 def to_json(obj: Any, indent: int | None = 2, sort_keys: bool = False) -> str:

@@ -39,6 +39,16 @@ def stage_config_text(stage: str, config: PipelineConfig, layout: Layout) -> str
     return header + yaml.safe_dump(data, sort_keys=False)
 
 
+def holds_password(text: str) -> bool:
+    """Whether a stage's wired YAML names a storage URL with a password (a sweep's `storage`).
+
+    The stage runs from that file, so the password stays in it; the file is written owner-only."""
+    from grits_lab.tune.storage import redact
+
+    storage = (yaml.safe_load(text) or {}).get("storage")
+    return isinstance(storage, str) and redact(storage) != storage
+
+
 def fingerprint(text: str, upstream: list[str]) -> str:
     return hashlib.sha256((text + "|" + "|".join(upstream)).encode()).hexdigest()[:16]
 
@@ -103,7 +113,7 @@ def _run_stages(config: PipelineConfig, layout: Layout, stages: list[str], texts
                     path.unlink()
             print(f"[{index}/{len(stages)}] {stage}: config changed, previous outputs removed", file=sys.stderr)
         config_path = layout.configs / f"{stage}.yaml"
-        write_text_atomic(config_path, text)
+        write_text_atomic(config_path, text, mode=0o600 if holds_password(text) else None)
         print(f"[{index}/{len(stages)}] {stage}: running ({config_path})", file=sys.stderr)
         state[stage] = {"status": "running", "fingerprint": fp}
         write_json_atomic(layout.root / STATE_FILE, state)

@@ -146,3 +146,20 @@ def test_a_cluster_address_where_nothing_answers_fails_before_the_pipeline_direc
     assert main(["pipeline", str(pipeline), "--no-progress"]) == 2
     assert f"cannot connect to the Ray cluster at 127.0.0.1:{port}" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("storage, mode", [("postgresql://u:S3cr3t/x@127.0.0.1:5999/db", 0o600), (None, None)])
+def test_a_sweep_stage_config_holding_a_storage_password_is_written_owner_only(tmp_path, capsys, monkeypatch, storage, mode):
+    from grits_lab.config import load_yaml
+    from grits_lab.io import _ordinary_mode
+
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    data = load_yaml("experiments/paper.yaml")
+    data["output_dir"] = str(tmp_path / "paper")
+    data["stages"]["sweep"]["overrides"] = {"storage": storage}
+    pipeline = _write(tmp_path / "p.yaml", data)
+    assert main(["pipeline", str(pipeline), "--only", "sweep", "--no-progress"]) == 2  # the evaluate stage has not run
+    written = tmp_path / "paper" / "configs" / "sweep.yaml"
+    assert written.stat().st_mode & 0o777 == (mode or _ordinary_mode(written))
+    assert yaml.safe_load(written.read_text())["storage"] == storage  # the stage runs from this file
+    assert "S3cr3t" not in capsys.readouterr().err
