@@ -63,6 +63,25 @@ def test_a_planted_policy_checkpoint_is_refused_in_one_line_before_the_run_and_n
     assert not marker.exists() and not (tmp_path / "run").exists()
 
 
+@pytest.mark.ray
+def test_a_cluster_where_nothing_answers_is_refused_in_one_line_before_the_run_directory_exists(models, tmp_path, capsys, monkeypatch):
+    import yaml
+    from tests.tune.sweep_helpers import free_port
+
+    from grits_lab.cli import main
+    from grits_lab.config import config_to_dict
+    from grits_lab.runners import executor_config
+
+    monkeypatch.setattr(executor_config, "CONNECT_TIMEOUT_S", 1.0)
+    address = f"127.0.0.1:{free_port()}"  # closed again: nothing listens there
+    path = tmp_path / "evaluate.yaml"
+    path.write_text(yaml.safe_dump(config_to_dict(eval_config(models, tmp_path / "run", methods=["rule_based"], executor={"backend": "ray"}))))
+    assert main(["evaluate", str(path), "--address", address, "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"cannot connect to the Ray cluster at {address}" in err[0], err
+    assert not (tmp_path / "run").exists()
+
+
 def test_an_override_that_gives_guidance_twice_is_refused_naming_the_key_and_both_lines(models, tmp_path, capsys):
     import yaml
 

@@ -98,6 +98,23 @@ def test_grits_evaluator_needs_its_config_and_checkpoints(sweep_file, tmp_path, 
     assert not (tmp_path / "results").exists()  # failed before any storage was created
 
 
+@pytest.mark.ray
+def test_a_grits_sweep_on_a_cluster_where_nothing_answers_is_refused_before_the_study_exists(sweep_file, tmp_path, capsys, monkeypatch):
+    from tests.tune.sweep_helpers import REPO
+
+    from grits_lab.runners import executor_config
+    from grits_lab.tune import grits_binding
+
+    monkeypatch.setattr(executor_config, "CONNECT_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(grits_binding, "check_method_checkpoints", lambda method, paths: None)  # checked before the cluster
+    monkeypatch.setenv("RAY_ADDRESS", "")  # --address sets it; restored at teardown
+    address = f"127.0.0.1:{free_port()}"
+    config = sweep_file(evaluator="grits", evaluation={"config": str(REPO / "experiments" / "evaluate_quick.yaml"), "checkpoints": []})
+    assert main(["sweep", str(config), "--address", address, "--no-progress"]) == 2
+    assert f"cannot connect to the Ray cluster at {address}" in one_error_line(capsys)
+    assert not (tmp_path / "results").exists()
+
+
 def test_a_misspelled_key_in_the_evaluation_config_stops_the_sweep_before_any_trial(sweep_file, tmp_path, capsys):
     (tmp_path / "eval.yaml").write_text("guidance: {rho: 1.0, treshold: 12}\n")
     config = sweep_file(evaluator="grits", evaluation={"config": str(tmp_path / "eval.yaml")})
