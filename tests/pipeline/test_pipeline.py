@@ -148,6 +148,16 @@ def test_a_cluster_address_where_nothing_answers_fails_before_the_pipeline_direc
     assert not out.exists()
 
 
+def test_a_second_pipeline_on_one_output_directory_is_refused_naming_the_first(tmp_path, demos_file, capsys, hold_directory):
+    out = tmp_path / "run"
+    out.mkdir()
+    holder = hold_directory(out, "pipeline")
+    pipeline = _write(tmp_path / "pipeline.yaml", {"name": "tiny", "output_dir": str(out), "stages": {"demos": {"config": str(demos_file)}}})
+    assert main(["pipeline", str(pipeline), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{out} is being written by `grits-lab pipeline` (pid {holder.pid} on" in err[0], err
+    assert [p.name for p in out.iterdir()] == [".grits-lab.lock"]
+
 @pytest.mark.parametrize("storage, mode", [("postgresql://u:S3cr3t/x@127.0.0.1:5999/db", 0o600), (None, None)])
 def test_a_sweep_stage_config_holding_a_storage_password_is_written_owner_only(tmp_path, capsys, monkeypatch, storage, mode):
     from grits_lab.config import load_yaml

@@ -212,3 +212,12 @@ def test_a_planted_pickle_as_last_pt_is_refused_on_resume_and_never_runs(demo_da
     with pytest.raises(InputError, match=f"refused checkpoint {last}"):
         train_policy(config, progress=False)
     assert not marker.exists()
+
+
+def test_a_second_trainer_of_one_run_directory_is_refused_naming_the_first(demo_dataset, tmp_path, hold_directory):
+    run = tmp_path / "run"
+    run.mkdir()
+    holder = hold_directory(run, "train policy")
+    with pytest.raises(StorageError, match=rf"is being written by `grits-lab train policy` \(pid {holder.pid} on"):
+        train_policy(_train_config(demo_dataset, run), max_steps=2, progress=False)
+    assert [p.name for p in run.iterdir()] == [".grits-lab.lock"]
