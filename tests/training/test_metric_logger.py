@@ -34,3 +34,16 @@ def test_a_resumed_run_drops_the_steps_after_its_checkpoint(tmp_path):
 
 def test_nothing_logged_draws_nothing(tmp_path):
     assert MetricLogger(tmp_path, tensorboard=False).close() is None and not (tmp_path / "curves.png").exists()
+
+
+def test_a_sparse_validation_loss_keeps_the_log_scale_and_counts_stay_off_the_metrics_panel():
+    from grits_lab.training.curves import curves_figure
+
+    # The policy logs val_loss every tenth step; the predictor logs its validation set's size (val_n).
+    frame = pd.DataFrame({"step": range(1, 21), "train_loss": [1.0 / s for s in range(1, 21)],
+                          "val_loss": [0.5 / s if s % 10 == 0 else None for s in range(1, 21)],
+                          "val_auroc": [0.24 + 0.025 * s for s in range(1, 21)], "val_n": [224] * 20})
+    assert curve_panels(frame) == [("loss", ["train_loss", "val_loss"]), ("validation and rollout metrics", ["val_auroc"])]
+    loss, metrics = curves_figure(frame).axes
+    assert loss.get_yscale() == "log"
+    assert metrics.get_ylim()[1] < 1.0  # the AUROC's rise fills the panel
