@@ -39,12 +39,15 @@ def test_a_replay_reproduces_every_recorded_metric(run, method):
         assert "p_spill_after" in result.compared and result.rho == 2.5 and result.s == 30
 
 
-def test_a_filmed_replay_is_the_same_episode_and_writes_a_captioned_video(run, tmp_path):
+def test_a_filmed_replay_is_the_same_episode_and_writes_a_captioned_video(run, tmp_path, capsys):
     run_dir, records = run
     video = tmp_path / "dp.mp4"
-    result = replay_episode(run_dir, **episode(records, "dp"), video=video, camera=SMALL_CAMERA, every=5)
+    result = replay_episode(run_dir, **episode(records, "dp"), video=video, camera=SMALL_CAMERA, every=5, progress=True)
     assert result.matches, result.describe()
     steps = int(result.replayed["scoop_steps"])
+    # The progress bar on stderr counts every action played, the scoop's and the transfer's.
+    final = capsys.readouterr().err.replace("\r", "\n").strip().splitlines()[-1]
+    assert final.startswith("replaying dp ") and int(re.search(r"(\d+)action", final).group(1)) >= steps, final
     reader = imageio.get_reader(video)
     try:
         frames = reader.count_frames()

@@ -1,5 +1,6 @@
 """Behavior cloning trains on the diffusion policy's demonstration loop: learning, no EMA, exact resume."""
 
+import pandas as pd
 import torch
 
 from grits_lab.config import config_from_dict
@@ -23,6 +24,10 @@ def test_bc_shares_the_loop_resume_included(demo_dataset, tmp_path):
     train_bc(bc_config(tmp_path / "b"), max_steps=10, progress=False)
     resumed = train_bc(bc_config(tmp_path / "b"), progress=False)
     assert resumed["resumed_from"] == 10 and straight["final_train_loss"] < straight["first_loss"]
+    # The policy's metric logger: one row per logged step, the curves drawn when training stops.
+    log = pd.read_csv(tmp_path / "a" / "metrics.csv")
+    assert list(log["step"]) == [5, 10, 15, 20] and log["val_loss"].notna().sum() == 2 and log["lr"].notna().all()
+    assert (tmp_path / "a" / "curves.png").stat().st_size > 0
     sa = torch.load(straight["checkpoint"], weights_only=True)
     sb = torch.load(resumed["checkpoint"], weights_only=True)
     assert sa["ema"] is None  # BC is judged by its own weights
