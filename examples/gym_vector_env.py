@@ -1,4 +1,4 @@
-"""Step a vector of grits_lab/Scoop-v4 envs with random relative actions; nothing is trained.
+"""Step a vector of the registered grits_lab/Scoop envs with random relative actions; nothing is trained.
 
     python examples/gym_vector_env.py --envs 2 --steps 20
 
@@ -14,7 +14,7 @@ import argparse
 import gymnasium
 import numpy as np
 
-import grits_lab.sim  # noqa: F401  (registers grits_lab/Scoop-v4)
+import grits_lab.sim  # noqa: F401  (registers the env under ENV_ID, grits_lab/Scoop-v<protocol version>)
 from grits_lab.sim import ENV_ID
 
 
