@@ -11,7 +11,10 @@ Faults. A spec whose actor dies (kill -9, node lost, out of memory) is re-run fr
 live actor, up to `max_attempts` runs, and a replacement actor is started; work goes only to
 actors that have answered. A replacement that the cluster cannot place (its node is gone and no
 CPU is left for it) is given up after `replace_timeout_s`, or at once when the cluster's CPUs
-already show it, and the pool shrinks to the actors that remain, with one line saying so. A spec
+already show it, and the pool shrinks to the actors that remain. One line says so once no other
+replacement is still awaited, so that the workers of one lost node, whose replacements are given up
+a moment apart, are reported together ("2 Ray workers were lost and not replaced (...): continuing
+with 1 worker"). A spec
 whose work function raises comes back as a failed result with its error (the worker catches it),
 and the job goes on.
 
@@ -158,6 +161,7 @@ class RayExecutor(Executor):
         self._queue: collections.deque[tuple[EpisodeSpec, int]] = collections.deque()
         self._in_flight: dict[Any, tuple[int, int, EpisodeSpec, int]] = {}
         self._ready_results: list[EpisodeResult] = []
+        self._lost_reasons: list[str] = []  # one per worker dropped and not yet reported (_report_lost)
         try:
             ray.get([s.actor.pid.remote() for s in self._live()], timeout=startup_timeout_s)
         except GetTimeoutError:
@@ -243,6 +247,7 @@ class RayExecutor(Executor):
             result.attempts = attempt
             results.append(result)
         self._give_up_unplaced_replacements()
+        self._report_lost()
         self._dispatch()
         return results
 
@@ -265,7 +270,8 @@ class RayExecutor(Executor):
         others = sum(1 for s in self._slots if s is not None) - 1
         fit = int(math.floor(float(ray.cluster_resources().get("CPU", 0.0)) / self.cpus_per_worker + 1e-9))
         if others >= fit and others > 0:  # the cluster already shows fewer CPUs: no room for a replacement
-            self._shrink(index, f"the cluster has {fit * self.cpus_per_worker:g} CPUs left")
+            cpus = fit * self.cpus_per_worker
+            self._shrink(index, f"the cluster has {cpus:g} CPU{'' if cpus == 1 else 's'} left")
             return
         replacement = self._start_actor(index, generation + 1)
         replacement.ready_ref = replacement.actor.pid.remote()
@@ -277,7 +283,7 @@ class RayExecutor(Executor):
         try:
             ray.get(ref)
         except RayError:  # lost before it ever ran (its node went away too)
-            self._shrink(index, "its replacement was lost before it started")
+            self._shrink(index, "a replacement was lost before it started")
             return
         slot.ready_ref = None
 
@@ -288,7 +294,8 @@ class RayExecutor(Executor):
             self._shrink(late, f"no CPU took a replacement within {self.replace_timeout_s:g} s")
 
     def _shrink(self, indices: list[int] | int, reason: str) -> None:
-        """Drop these slots for good, with one line; the specs queued go to the actors that remain."""
+        """Drop these slots for good; the specs queued go to the actors that remain, and `_report_lost`
+        says so in one line."""
         indices = [indices] if isinstance(indices, int) else indices
         for index in indices:
             slot = self._slots[index]
@@ -299,12 +306,28 @@ class RayExecutor(Executor):
                     pass
             self._slots[index] = None
         self.num_workers = sum(1 for s in self._slots if s is not None)
+        self._lost_reasons += [reason] * len(indices)
         if self.num_workers == 0:
-            raise GritsError(f"every Ray worker was lost ({reason}); rerun the job to resume it when the cluster has CPUs again")
-        lost = f"{len(indices)} Ray workers were" if len(indices) > 1 else "a Ray worker was"
-        log.warning("%s lost and not replaced (%s): continuing with %d workers", lost, reason, self.num_workers)
+            reasons = "; ".join(dict.fromkeys(self._lost_reasons))
+            self._lost_reasons = []
+            raise GritsError(f"every Ray worker was lost ({reasons}); rerun the job to resume it when the cluster has CPUs again")
+
+    def _report_lost(self, *, now: bool = False) -> None:
+        """One line for the workers dropped since the last one, once no replacement is still awaited
+        (or `now`): the workers of a lost node are given up a moment apart, in different polls."""
+        if not self._lost_reasons:
+            return
+        if not now and any(s is not None and s.ready_ref is not None for s in self._slots):
+            return
+        n, reasons = len(self._lost_reasons), "; ".join(dict.fromkeys(self._lost_reasons))
+        self._lost_reasons = []
+        lost = f"{n} Ray workers were" if n > 1 else "a Ray worker was"
+        left = f"{self.num_workers} worker{'' if self.num_workers == 1 else 's'}"
+        log.warning("%s lost and not replaced (%s): continuing with %s", lost, reasons, left)
 
     def close(self) -> None:
+        if getattr(self, "_lost_reasons", None):
+            self._report_lost(now=True)
         for slot in getattr(self, "_slots", []):
             if slot is None:
                 continue

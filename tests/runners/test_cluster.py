@@ -225,10 +225,11 @@ def test_a_collection_finishes_when_a_node_is_lost_following_the_readme_steps(tw
     after_kill = time.monotonic() - killed_at
     print(f"killed after {killed_at - started:.1f} s, finished {after_kill:.1f} s later")
     assert "re-running it from its seed" in err, err[-3000:]
-    # The pool gives the lost worker's replacement up after replace_timeout_s (5 s here) and says so;
-    # on a busy machine the live worker may finish the last trials first, and then there is nothing to say.
+    # The pool gives the lost node's two replacements up after replace_timeout_s (5 s here) and says so in
+    # one line; on a busy machine the live worker may finish the last trials first, and then there is nothing to say.
     if "not replaced (" in err:
-        assert "continuing with 1 workers" in err, err[-3000:]
+        lines = [line for line in err.splitlines() if "not replaced (" in line]
+        assert len(lines) == 1 and lines[0].endswith("continuing with 1 worker"), err[-3000:]
     else:
         assert after_kill < 5 + 30, err[-3000:]
     assert after_kill < 120  # bounded: the job never waits on a worker the cluster cannot place
