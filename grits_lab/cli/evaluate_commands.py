@@ -4,6 +4,7 @@ and `grits-lab replay RUN_DIR` (one recorded episode again, checked against its 
 from __future__ import annotations
 
 import argparse
+import sys
 
 from grits_lab.cli.flags import retire
 
@@ -16,7 +17,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "Run every method of an evaluation config on its foods x levels x trials (the same seeds "
             "for every method) over Ray or serially, writing one record per episode to "
             "OUTPUT_DIR/episodes.parquet with config.yaml and provenance.json beside it. Running the "
-            "same command again skips finished episodes."
+            "same command again skips finished episodes. Exit status 1 when any recorded episode "
+            "failed (its error is kept in the records), 2 for bad input."
         ),
     )
     parser.add_argument("config", help="evaluation config, e.g. experiments/evaluate_quick.yaml")
@@ -58,7 +60,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _run(args: argparse.Namespace) -> int:
     from grits_lab.config import load_yaml
     from grits_lab.evaluation.evaluation_config import load_evaluation_config
-    from grits_lab.evaluation.evaluation_run import evaluate, summary_table
+    from grits_lab.evaluation.evaluation_run import evaluate, failed_episodes_line, summary_table
 
     overrides = dict(load_yaml(args.override)) if args.override else {}
     if "guidance" in overrides and not isinstance(overrides["guidance"], dict):
@@ -79,6 +81,11 @@ def _run(args: argparse.Namespace) -> int:
     records = evaluate(config, progress=not args.no_progress, restart=args.restart)
     print(summary_table(records))
     print(f"records: {config.output_dir}/episodes.parquet ({len(records)} episodes); tables and figures: grits-lab report {config.output_dir}")
+    # Episodes that raised are recorded (and skipped on resume) like any other; the exit status says so.
+    failed = failed_episodes_line(records, f"{config.output_dir}/episodes.parquet")
+    if failed:
+        print(f"grits-lab: error: {failed}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -341,6 +341,20 @@ def evaluate_file(path: str | Path, overrides: dict[str, Any] | None = None, **k
     return evaluate(load_evaluation_config(path, overrides), **kwargs)
 
 
+def failed_episodes_line(records: pd.DataFrame, records_path: str | Path) -> str | None:
+    """One line for the records that hold an error (how many, and the first one's episode and error),
+    or None when every episode ran; `grits-lab evaluate` prints it and exits 1."""
+    if records.empty:
+        return None
+    failed = records[records["error"].fillna("").astype(str).str.len() > 0]
+    if failed.empty:
+        return None
+    first = failed.iloc[0]
+    error = (str(first["error"]).strip().splitlines() or ["unknown error"])[0]
+    return (f"{len(failed)} of {len(records)} episodes failed (records kept in {records_path}); the first, "
+            f"{first['method']} on {first['food']} {first['level']} trial {first['trial']}: {error}")
+
+
 def summary_table(records: pd.DataFrame) -> str:
     """Per method: episodes, errors, and rates with Wilson 95% intervals (the report layer's statistics)."""
     from grits_lab.intervals import wilson_interval
