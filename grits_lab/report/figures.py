@@ -47,8 +47,15 @@ VARIANT_HATCHES = ("", "//", "..", "xx", "\\\\")
 MARKER_PT = 5  # size of the paper's diamonds (points)
 
 
-def method_color(method: str, fallback_index: int) -> tuple:
-    return METHOD_COLORS.get(method, _PALETTE[(len(METHOD_COLORS) + fallback_index) % len(_PALETTE)])
+# Colours no built-in method has, for a lab's own methods (`custom_methods`): tab10's one left, then
+# others far from tab10's hues.
+EXTRA_COLORS = (*_PALETTE[len(METHOD_COLORS):], "#222222", "#1b9e77", "#253494", "#e6ab02")
+
+
+def method_color(method: str, extra_index: int = 0) -> tuple | str:
+    """A built-in method's own colour; any other method the `extra_index`-th of EXTRA_COLORS (its
+    place among the figure's methods without a colour of their own), so it never wears a built-in's."""
+    return METHOD_COLORS.get(method, EXTRA_COLORS[extra_index % len(EXTRA_COLORS)])
 
 
 def method_bars(data: pd.DataFrame, path: Path, title: str) -> Path:
@@ -63,11 +70,12 @@ def method_bars_figure(data: pd.DataFrame, title: str) -> plt.Figure:
     fig, ax = plt.subplots(figsize=(max(7.5, 1.0 + 1.1 * n_methods * len(OUTCOME_COLUMNS) * 0.45), 4.6))
     paper_drawn = False
     settings_seen: dict[str, int] = {}
+    extra = [m for m in dict.fromkeys(data["method"]) if m not in METHOD_COLORS] if len(data) else []
     for i, row in enumerate(data.itertuples(index=False)):
         row = row._asdict()
         x = np.arange(len(OUTCOME_COLUMNS)) + (i - (n_methods - 1) / 2) * width
         label = f"{row['method_name']} (n={row['episodes']})" if not row["missing"] else f"{row['method_name']} (missing)"
-        color = method_color(row["method"], i)
+        color = method_color(row["method"], extra.index(row["method"]) if row["method"] in extra else 0)
         # A method at several (rho, s) keeps its colour; its second, third... setting is hatched.
         seen = settings_seen.get(row["method"], 0)
         settings_seen[row["method"]] = seen + 1

@@ -248,3 +248,23 @@ def test_the_training_section_shows_each_runs_curves_and_last_values(tmp_path):
     assert section.count("<img") == 2 and "val_auroc 0.74" in section and "val_loss 0.6" in section
     assert (result.out_dir / "figures" / "training_predictor_predictor.png").is_file()
     assert "<h2>Training</h2>" not in (build_report(tmp_path, tmp_path / "plain").out_dir / "report.html").read_text()
+
+
+def test_a_labs_own_methods_never_wear_a_built_in_methods_colour():
+    from matplotlib.colors import to_rgb
+
+    from grits_lab.report import figures
+    from grits_lab.report.tables import method_table
+    from grits_lab.report.vocabulary import MAIN_METHODS
+
+    # Fig. 5 lists the six main methods, then the records' other methods: torch_mlp sits at row 6,
+    # where a colour chosen by row was dp_post's brown.
+    rows = [episode(m, "sago", "low", i, "success") for m in ("dp_post", "torch_mlp", "lab_policy") for i in range(2)]
+    table = method_table(normalize_records(pd.DataFrame(rows)), MAIN_METHODS, "fig5", "Fig. 5", "", extra=True)
+    fig = figures.method_bars_figure(table.data, "Fig. 5")
+    handles, labels = fig.axes[0].get_legend_handles_labels()
+    colour = {label.rsplit(" (n=", 1)[0]: to_rgb(h.patches[0].get_facecolor()) for h, label in zip(handles, labels) if "(n=" in label}
+    built_in = {to_rgb(c) for c in figures.METHOD_COLORS.values()}
+    assert set(colour) == {"Diffusion Policy (Post.)", "torch_mlp", "lab_policy"}
+    assert colour["torch_mlp"] not in built_in and colour["lab_policy"] not in built_in
+    assert colour["torch_mlp"] != colour["lab_policy"]
