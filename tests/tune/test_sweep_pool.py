@@ -148,3 +148,14 @@ def test_ctrl_c_in_a_trial_shuts_the_sweeps_pool_down(sweep_file, models, tmp_pa
     with pytest.raises(KeyboardInterrupt):
         run_sweep(config, progress=False, plots=False)
     assert len(spy_pools) == 1 and spy_pools[0].closed
+
+
+def test_two_grits_sweep_processes_each_with_its_pool_share_one_journal_and_its_budget(sweep_file, models, tmp_path):  # noqa: F811
+    from tests.tune.test_workers import assert_shared_study, finish, load_trials, start
+
+    config, _ = grits_sweep(sweep_file, models, tmp_path, {"backend": "serial"}, n_trials=4)
+    path = tmp_path / f"{config.study_name}.yaml"  # the file grits_sweep wrote; its journal is the default one
+    procs = [start(path), start(path)]
+    for proc in procs:
+        finish(proc, timeout=600)
+    assert_shared_study(load_trials(path), 4)
