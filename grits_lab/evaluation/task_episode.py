@@ -231,8 +231,8 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     heading = math.atan2(target.centre[1], target.centre[0]) if settings.heading == "radial" else None
     check = ((lambda actions: env.check_path(actions, rest_pull=settings.rest_pull, touches=settings.avoid_arm_contact))
              if settings.reach_check else None)
-    lip = spoon.half_width + spoon.wall_height * math.sin(math.radians(spoon.wall_slant_deg)) if settings.pour_lip_over_centre else 0.0
-    plan = choose_transfer(current, target, obstacles, settings, max_step, reach, heading, check, lip)
+    plan = choose_transfer(current, target, obstacles, settings, max_step, reach, heading, check,
+                           spoon.pour_edge(settings.pour_axis))
     ik_failures, joint_steps, speed_ratios = 0, [0.0], [0.0]
     spilled_by_stage: dict[str, int] = {}
 

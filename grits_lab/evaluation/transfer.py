@@ -14,8 +14,10 @@ the load), travel in a
 straight line at that height (turning the spoon, level, to point away from the robot's base over
 the target when asked: keeping the scoop's heading twists the wrist to its joint limit for
 targets off to the side), descend to the pour height above the target's rim. It is checked
-against the obstacles' bounding cylinders before it is executed. The pour rolls the spoon about
-its own x axis above the target's centre, then the spoon holds still while the food settles.
+against the obstacles' bounding cylinders before it is executed. The pour turns the spoon above
+the target's centre, about its own x axis (`pour_axis: roll`, food leaves over the side lip) or
+about its tip (`pour_axis: tip`, food slides off the lipless tip), then the spoon holds still while
+the food settles.
 """
 
 from __future__ import annotations
@@ -137,7 +139,7 @@ def path_is_clear(path: np.ndarray, obstacles: list[Obstacle], spoon_reach: floa
 def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], clearance: float,
                   pour_height: float, max_step: float, spoon_reach: float, level_steps: int = 1,
                   target_heading: float | None = None, level_yaw_offset: float = 0.0, pour_offset: float = 0.0,
-                  profile: str = "constant", lip_offset: float = 0.0) -> np.ndarray:
+                  profile: str = "constant", lip_offset: float = 0.0, pour_axis: str = "roll") -> np.ndarray:
     """(T, 9) spoon path: up to a safe height while levelling over `level_steps` actions, across, down to
     `pour_height` above the target's rim (negative: into the bowl), level from the end of the lift on.
     The first `lift_length(path)` actions are the lift (they rise straight up); the rest the carry.
@@ -146,9 +148,10 @@ def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
     pour_offset: metres the pour point moves from the target's centre away from the robot's base
     (at the world origin), which the arm reaches more easily for bowls close to it; profile: each
     straight segment's time-parameterization (`_line`); lip_offset: metres the spoon's centre is
-    moved along its own +y axis at the pour, so that its -y lip, the one `pour_motion` lowers and
-    the food leaves by, pours over the target's centre instead of 2-3 cm from it. InputError when
-    the path would cross an obstacle.
+    moved at the pour so that the edge the food leaves by pours over the target's centre instead of
+    2-3 cm from it: along the spoon's own +y axis for `pour_axis` "roll" (its -y lip, the one
+    `pour_motion` lowers), along its -x axis for "tip" (its tip). InputError when the path would
+    cross an obstacle.
     """
     rotation = level_rotation(current)
     if level_yaw_offset:
@@ -160,7 +163,7 @@ def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
         centre = centre + pour_offset * centre / max(float(np.linalg.norm(centre)), 1e-9)
     arrival = rotation if target_heading is None else heading_rotation(target_heading)
     if lip_offset:
-        centre = centre + lip_offset * arrival[:2, 1]
+        centre = centre + lip_offset * (arrival[:2, 1] if pour_axis == "roll" else -arrival[:2, 0])
     above_target = np.array([centre[0], centre[1], safe_z])
     pour_point = np.array([centre[0], centre[1], target.rim_height + pour_height])
     tipped = rot6d_to_matrix(np.asarray(current[3:9], dtype=np.float64))
@@ -177,17 +180,31 @@ def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
     return path
 
 
-def pour_motion(pose: np.ndarray, angle_deg: float, steps: int, profile: str = "constant") -> np.ndarray:
-    """(steps, 9) roll the spoon about its own x axis by `angle_deg`, in place, in `steps` actions
-    (profile: "constant" equal increments, "min_jerk" from rest to rest, `min_jerk`). A positive
-    angle raises the spoon's +y side: the food leaves over its -y lip. The hand, 11 cm above the
-    spoon's bowl on the steep handle, swings down beside it: 6 cm below the bowl at 120 degrees."""
+def pour_motion(pose: np.ndarray, angle_deg: float, steps: int, profile: str = "constant", axis: str = "roll",
+                tip: float = 0.0) -> np.ndarray:
+    """(steps, 9) turn the spoon by `angle_deg` in `steps` actions (profile: "constant" equal
+    increments, "min_jerk" from rest to rest, `min_jerk`).
+
+    axis "roll": about the spoon's own x axis, in place. A positive angle raises the spoon's +y
+    side: the food leaves over its -y lip. The hand, 11 cm above the spoon's bowl on the steep
+    handle, swings down beside it: 6 cm below the bowl at 120 degrees.
+    axis "tip": about the spoon's y axis through its tip, the point `tip` metres along its +x axis,
+    which stays where it is. A positive angle lowers the tip: the food slides off the lipless tip
+    while the handle, and the hand on it, rise over the spoon (at 90 degrees the grasp point is
+    about 9 cm above the tip).
+    """
     rot = rot6d_to_matrix(np.asarray(pose[3:9], dtype=np.float64))
+    position = np.asarray(pose[:3], dtype=np.float64)
+    pivot = position + rot[:, 0] * tip
     out = []
     for f in profile_fractions(steps, profile):
         a = math.radians(angle_deg) * f
-        roll = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
-        out.append(_pose(np.asarray(pose[:3], dtype=np.float64), rot @ roll))
+        c, s = math.cos(a), math.sin(a)
+        if axis == "roll":
+            out.append(_pose(position, rot @ np.array([[1, 0, 0], [0, c, -s], [0, s, c]])))
+        else:
+            turned = rot @ np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+            out.append(_pose(pivot - turned[:, 0] * tip, turned))
     return np.stack(out)
 
 
@@ -230,16 +247,19 @@ def slow_to_limits(start: np.ndarray, actions: np.ndarray, stages: list[str], ch
 
 @dataclass(frozen=True)
 class TransferOption:
-    """One way of carrying the spoon: the lift's levelling (actions, heading turn in degrees) and the pour (height, offset, m)."""
+    """One way of carrying the spoon: the lift's levelling (actions, heading turn in degrees) and the
+    pour (height, offset, m; the spoon's heading there, degrees from the one `TransferSettings.heading` gives)."""
 
     level_steps: int
     level_yaw_deg: float
     pour_height: float
     pour_offset: float
+    pour_yaw_deg: float = 0.0
 
     def describe(self) -> str:
+        yaw = f", turned {self.pour_yaw_deg:+g} deg" if self.pour_yaw_deg else ""
         return (f"level over {self.level_steps} actions, heading {self.level_yaw_deg:+g} deg; "
-                f"pour {self.pour_height * 100:g} cm above the rim, {self.pour_offset * 100:+g} cm out")
+                f"pour {self.pour_height * 100:g} cm above the rim, {self.pour_offset * 100:+g} cm out{yaw}")
 
 
 @dataclass
@@ -263,14 +283,16 @@ class TransferPlan:
 def transfer_options(settings: Any) -> list[TransferOption]:
     """The options to try, in order: the configured one first; lifts keep the scoop's heading before
     they turn it, and level over the configured actions before the alternatives; each lift with the
-    configured pour first, then the pour alternatives (`TransferSettings`, evaluation_config.py)."""
+    configured pour first, then the pour alternatives, the pour's heading varying fastest
+    (`TransferSettings`, grits_lab/task/transfer_settings.py)."""
     lifts = [(n, y) for y, n in itertools.product([0.0] + list(settings.alternative_level_yaw_deg),
                                                   [settings.level_steps] + list(settings.alternative_level_steps))]
-    pours = [(h, o) for h, o in itertools.product([settings.pour_height] + list(settings.alternative_pour_heights),
-                                                  [0.0] + list(settings.alternative_pour_offsets))]
+    pours = list(itertools.product([settings.pour_height] + list(settings.alternative_pour_heights),
+                                   [0.0] + list(settings.alternative_pour_offsets),
+                                   [settings.pour_yaw_deg] + list(settings.alternative_pour_yaw_deg)))
     seen, out = set(), []
-    for (n, y), (h, o) in itertools.product(lifts, pours):
-        option = TransferOption(int(n), float(y), float(h), float(o))
+    for (n, y), (h, o, w) in itertools.product(lifts, pours):
+        option = TransferOption(int(n), float(y), float(h), float(o), float(w))
         if option not in seen:
             seen.add(option)
             out.append(option)
@@ -279,12 +301,18 @@ def transfer_options(settings: Any) -> list[TransferOption]:
 
 def option_motion(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], settings: Any, max_step: float,
                   spoon_reach: float, target_heading: float | None, option: TransferOption,
-                  lip_offset: float = 0.0) -> tuple[np.ndarray, list[str]]:
-    """The actions (T, 9) of one option, lift to pour, and each action's stage."""
+                  pour_edge: float = 0.0) -> tuple[np.ndarray, list[str]]:
+    """The actions (T, 9) of one option, lift to pour, and each action's stage. pour_edge: metres from
+    the spoon's centre to the edge the food leaves by (its -y lip for `settings.pour_axis` "roll",
+    its tip for "tip"); with `settings.pour_lip_over_centre` that edge pours over the target's centre."""
+    lip_offset = pour_edge if settings.pour_lip_over_centre else 0.0
+    if target_heading is not None:
+        target_heading += math.radians(option.pour_yaw_deg)
     path = plan_transfer(current, target, obstacles, settings.clearance, option.pour_height, max_step, spoon_reach,
                          option.level_steps, target_heading, math.radians(option.level_yaw_deg), option.pour_offset,
-                         settings.profile, lip_offset)
-    pour = pour_motion(path[-1], settings.pour_angle_deg, settings.pour_steps, settings.profile)
+                         settings.profile, lip_offset, settings.pour_axis)
+    pour = pour_motion(path[-1], settings.pour_angle_deg, settings.pour_steps, settings.profile, settings.pour_axis,
+                       tip=pour_edge)
     lift = lift_length(path)
     hold = np.repeat(path[lift - 1 : lift], settings.lift_hold_steps, axis=0)  # the lifted spoon held still
     stages = ["lift"] * (lift + len(hold)) + ["carry"] * (len(path) - lift) + ["pour"] * len(pour)
@@ -293,7 +321,7 @@ def option_motion(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
 
 def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], settings: Any, max_step: float,
                     spoon_reach: float, target_heading: float | None,
-                    check: Callable[[np.ndarray], Any] | None, lip_offset: float = 0.0) -> TransferPlan:
+                    check: Callable[[np.ndarray], Any] | None, pour_edge: float = 0.0) -> TransferPlan:
     """Plan the transfer and pour, checked for reach (and slowed to the Panda's joint limits) when
     `check` is given.
 
@@ -314,7 +342,7 @@ def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[O
         if failed_lift == (option.level_steps, option.level_yaw_deg):
             continue
         actions, stages = option_motion(current, target, obstacles, settings, max_step, spoon_reach, target_heading, option,
-                                        lip_offset)
+                                        pour_edge)
         if check is None:
             return TransferPlan(actions, stages, option, reachable=True, n_checks=0)
         n_checks += 1

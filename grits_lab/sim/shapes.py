@@ -95,6 +95,14 @@ class SpoonGeometry:
         start = np.array([-self.half_length - 0.004, 0.0, self.rim_height * 0.5])
         return start + self.handle_length * np.array([-math.cos(e), 0.0, math.sin(e)])
 
+    def pour_edge(self, axis: str) -> float:
+        """Metres from the spoon's centre to the edge food leaves by when poured: the top of the side
+        wall (its -y lip) for a roll about x, the tip (+x, a lip of only the wall's thickness) for a
+        turn about the tip."""
+        if axis == "roll":
+            return self.half_width + self.wall_height * math.sin(math.radians(self.wall_slant_deg))
+        return self.half_length + self.thickness
+
     def hand_from_spoon_rotation(self) -> np.ndarray:
         """(3, 3) rotation of the hand's grasp frame expressed in the spoon frame.
 

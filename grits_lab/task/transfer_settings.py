@@ -34,13 +34,24 @@ class TransferSettings:
     # target (the arm's natural posture there); "keep": keep the scoop's heading, which twists the
     # wrist to its limit for targets off to the side.
     heading: Literal["radial", "keep"] = "radial"
-    # Spoon centre above the target bowl's rim when pouring (m; negative: below it). At 5 mm the
-    # rolled spoon's lower lip ends about 2 cm below the rim, 1.5 cm above the bowl's floor.
-    pour_height: float = 0.005
+    # Height above the target bowl's rim at which the pour starts (m; negative: below it): of the
+    # spoon's tip for a tip pour, of its centre for a roll. At 4 cm the tipped spoon hangs from its
+    # tip into the bowl, its back edge about 2 cm above the bowl's floor; a roll at 5 mm ends with
+    # its lower lip about 2 cm below the rim.
+    pour_height: float = 0.04
     # Place the spoon so that the lip the food leaves by, not its centre, is over the target's
     # centre (2.6 cm along the spoon's width): poured food then lands mid-bowl, not by its wall.
     pour_lip_over_centre: bool = True
-    pour_angle_deg: float = 120.0  # roll of the spoon about its x axis to empty it
+    # "tip" (scoop-v6): turn the spoon about its tip, food sliding off the lipless tip while the
+    # handle and the hand on it stay above the spoon. "roll" (scoop-v5): turn it about its own x
+    # axis, food leaving over the side lip; the hand, 11 cm up the steep handle, swings down
+    # beside the spoon and onto the table (docs/experiments/oracle_transfer_v5).
+    pour_axis: Literal["roll", "tip"] = "tip"
+    pour_angle_deg: float = 90.0  # turn of the spoon about `pour_axis` to empty it (the roll's was 120)
+    # The spoon's heading at the pour, degrees from the one `heading` gives (radial: pointing away
+    # from the robot's base). A tip pour turned 90 degrees moves the rising hand sideways, which the
+    # arm follows; pointing away, it moves the hand 20 cm farther out, beyond reach for far bowls.
+    pour_yaw_deg: float = 90.0
     # Actions of the roll: 3 s, a mean 40 deg/s; at the spoon's edge (2 cm) the roll's peak
     # accelerations are under 0.05 m/s^2, so food slides out under gravity rather than being flung.
     pour_steps: int = 30
@@ -53,7 +64,8 @@ class TransferSettings:
     # rad in one action. A motion that fails, or holds an unreachable pose, is replaced by the
     # first alternative that passes: the lift with `alternative_level_steps` and the level spoon
     # turned by `alternative_level_yaw_deg`, the pour from `alternative_pour_heights` and moved
-    # `alternative_pour_offsets` metres away from the robot's base (negative: towards it).
+    # `alternative_pour_offsets` metres away from the robot's base (negative: towards it), turned by
+    # `alternative_pour_yaw_deg`.
     # At most `max_checks` options (about 1 s each on one core, more when slowed).
     reach_check: bool = True
     # The IK's null-space pull towards the arm's rest posture in these stages. Off: the arm follows
@@ -63,17 +75,18 @@ class TransferSettings:
     rest_pull: bool = False
     slow_to_limits: bool = True
     # With the reach check: an option whose arm (not the spoon) comes within 5 mm of the table or a
-    # bowl on the kinematic copy fails too. Off by default: the roll swings the hand 6 cm below the
-    # spoon's bowl, onto the table in 70 of the oracle's 72 pours; on the one target checked option
-    # by option, pours up to 9 cm above the rim and the rest pull still touched, and a 90-degree
-    # roll was unreachable. `transfer_arm_contact_steps` counts the actions the arm touched.
-    avoid_arm_contact: bool = False
+    # bowl on the kinematic copy fails too, as a motion planner's collision check fails it. The
+    # roll's options touched on nearly every target (its hand swings onto the table), so scoop-v5
+    # ran them with this off; the tip pour keeps the hand up. `transfer_arm_contact_steps` counts
+    # the actions the arm touched.
+    avoid_arm_contact: bool = True
     max_slowdown: int = 8
     max_joint_step: float = 0.5
     alternative_level_steps: list[int] = field(default_factory=lambda: [30])
     alternative_level_yaw_deg: list[float] = field(default_factory=lambda: [-60.0, 60.0, -90.0, 90.0])
-    alternative_pour_heights: list[float] = field(default_factory=lambda: [0.02, 0.04])
+    alternative_pour_heights: list[float] = field(default_factory=lambda: [0.06])
     alternative_pour_offsets: list[float] = field(default_factory=lambda: [0.03, -0.03])
+    alternative_pour_yaw_deg: list[float] = field(default_factory=lambda: [-90.0, 135.0, -135.0])
     max_checks: int = 16
     # When no option passes: "hold" keeps the loaded spoon where the scoop left it (a planner that
     # finds no motion within the arm's reach and velocity limits does not move; the task fails with
@@ -95,6 +108,7 @@ class TransferSettings:
         require(all(h > -0.03 for h in self.alternative_pour_heights), "transfer.alternative_pour_heights",
                 self.alternative_pour_heights, f"a list of heights {deep}")
         require(self.max_speed > 0, "transfer.max_speed", self.max_speed, "positive")
+        require(self.pour_axis in ("roll", "tip"), "transfer.pour_axis", self.pour_axis, "roll or tip")
         require(self.pour_steps >= 1, "transfer.pour_steps", self.pour_steps, "at least 1")
         require(self.level_steps >= 1, "transfer.level_steps", self.level_steps, "at least 1")
         require(self.lift_hold_steps >= 0, "transfer.lift_hold_steps", self.lift_hold_steps, "non-negative")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -10,6 +12,8 @@ from grits_lab.evaluation.transfer import Obstacle, fit_circle, locate_bowl, pat
 from grits_lab.perception.composite import CloudConfig
 from grits_lab.perception.env_clouds import builder_for_env
 from grits_lab.sim import ScoopEnv, SimConfig
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
@@ -93,17 +97,28 @@ def _scene_obstacles(env, target_xy, seed=2):
     return scene, target, obstacles
 
 
+def _rolled(settings_class, **overrides):
+    """Transfer settings with scoop-v5's roll pour (experiments/pour_roll.yaml): by the robot's base
+    its first option is out of the arm's reach, which the reach-check tests need."""
+    from grits_lab.config import load_yaml
+
+    return settings_class(**{**load_yaml(REPO / "experiments" / "pour_roll.yaml")["transfer"], **overrides})
+
+
 def test_transfer_options_start_with_the_configured_one_and_never_repeat():
     from grits_lab.evaluation.evaluation_config import TransferSettings
     from grits_lab.evaluation.transfer import TransferOption, transfer_options
 
-    settings = TransferSettings(level_steps=10, pour_height=0.01, alternative_pour_heights=[0.03, 0.05])
+    settings = TransferSettings(level_steps=10, pour_height=0.01, alternative_pour_heights=[0.03, 0.05], pour_yaw_deg=90.0,
+                                alternative_pour_yaw_deg=[-90.0])
     options = transfer_options(settings)
-    assert options[0] == TransferOption(10, 0.0, 0.01, 0.0)
-    assert options[1] == TransferOption(10, 0.0, 0.01, 0.03)  # the pour alternatives of a lift come before the next lift
-    assert len(options) == len(set(options)) == 2 * 5 * 3 * 3  # level steps x headings x pour heights x offsets
+    assert options[0] == TransferOption(10, 0.0, 0.01, 0.0, 90.0)
+    assert options[1] == TransferOption(10, 0.0, 0.01, 0.0, -90.0)  # the pour's heading varies fastest
+    assert options[2] == TransferOption(10, 0.0, 0.01, 0.03, 90.0)  # the pour alternatives of a lift come before the next lift
+    assert len(options) == len(set(options)) == 2 * 5 * 3 * 3 * 2  # level steps x headings x pour heights x offsets x pour headings
     assert transfer_options(TransferSettings(alternative_level_steps=[10], alternative_level_yaw_deg=[0.0], pour_height=0.01,
-                                             alternative_pour_heights=[0.01], alternative_pour_offsets=[0.0])) == options[:1]
+                                             alternative_pour_heights=[0.01], alternative_pour_offsets=[0.0],
+                                             pour_yaw_deg=90.0, alternative_pour_yaw_deg=[90.0])) == options[:1]
 
 
 def test_an_unreachable_pour_is_replaced_by_one_the_arm_reaches(env):
@@ -117,7 +132,7 @@ def test_an_unreachable_pour_is_replaced_by_one_the_arm_reaches(env):
     from grits_lab.sim.env import matrix_to_pose9
 
     scene, target, obstacles = _scene_obstacles(env, (0.30, 0.20))
-    settings = TransferSettings(alternative_pour_heights=[0.05])  # the pour the arm reaches here: 5 cm up, 3 cm out
+    settings = _rolled(TransferSettings, alternative_pour_heights=[0.05])  # the pour the arm reaches here: 5 cm up, 3 cm out
     current = matrix_to_pose9(scene.spoon_pose())
     heading = math.atan2(target.centre[1], target.centre[0])
     check = lambda actions: env.check_path(actions, rest_pull=False)  # noqa: E731 (the stages after the scoop)
@@ -204,8 +219,8 @@ def test_without_a_passing_option_the_smallest_joint_step_is_taken():
     from grits_lab.evaluation.evaluation_config import TransferSettings
     from grits_lab.evaluation.transfer import BowlEstimate, choose_transfer
 
-    settings = TransferSettings(alternative_level_steps=[], alternative_level_yaw_deg=[-60.0],
-                                alternative_pour_heights=[], alternative_pour_offsets=[], slow_to_limits=False)
+    settings = TransferSettings(alternative_level_steps=[], alternative_level_yaw_deg=[-60.0], alternative_pour_heights=[],
+                                alternative_pour_offsets=[], alternative_pour_yaw_deg=[], slow_to_limits=False)
     start = np.array([0.6, -0.1, 0.12, 1, 0, 0, 0, 1, 0], dtype=np.float32)
     target = BowlEstimate(np.array([0.45, 0.3, 0.0]), 0.06, 0.05, 100, 0.0)
     answers = iter([(2, 1.4), (9, 0.35)])  # (unreachable actions, largest joint step) of each option
@@ -215,7 +230,7 @@ def test_without_a_passing_option_the_smallest_joint_step_is_taken():
         unreachable = np.zeros(len(actions), dtype=bool)
         unreachable[-n_bad:] = True  # at the pour: a failure after the lift
         return SimpleNamespace(unreachable=unreachable, joint_steps=np.full(len(actions), step),
-                               speed_ratios=np.full(len(actions), step / 0.2175))
+                               speed_ratios=np.full(len(actions), step / 0.2175), touches=None)
 
     plan = choose_transfer(start, target, [], settings, 0.012, 0.036, None, check)
     assert (plan.option.level_yaw_deg, plan.reachable, plan.n_checks) == (-60.0, False, 2)
@@ -247,8 +262,8 @@ def test_when_no_option_passes_the_arm_holds_the_spoon_instead_of_running_a_moti
     from grits_lab.evaluation.task_episode import run_transfer
 
     scene, _, _ = _scene_obstacles(env, (0.30, 0.20))
-    settings = TransferSettings(alternative_level_steps=[], alternative_level_yaw_deg=[], alternative_pour_heights=[],
-                                alternative_pour_offsets=[])
+    settings = _rolled(TransferSettings, alternative_level_steps=[], alternative_level_yaw_deg=[], alternative_pour_heights=[],
+                       alternative_pour_offsets=[])
     before = env.spoon_pose()
     out = run_transfer(env, scene, settings)
     assert out["reachable"] is False and out["plan"].startswith("held: no option passed")
@@ -287,7 +302,45 @@ def test_an_arm_that_would_touch_the_table_fails_the_option_only_when_asked():
         return SimpleNamespace(unreachable=np.zeros(n, bool), joint_steps=np.full(n, 0.05), speed_ratios=np.full(n, 0.2),
                                touches=np.arange(n) >= n - 5)
 
-    allowed = choose_transfer(start, target, [], TransferSettings(), 0.012, 0.036, None, check)
+    allowed = choose_transfer(start, target, [], TransferSettings(avoid_arm_contact=False), 0.012, 0.036, None, check)
     avoided = choose_transfer(start, target, [], TransferSettings(avoid_arm_contact=True, max_checks=3), 0.012, 0.036, None, check)
     assert allowed.reachable and allowed.n_checks == 1
     assert not avoided.reachable and avoided.n_checks == 3  # every option touches: none passes
+
+
+def test_a_tip_pour_turns_the_spoon_about_its_tip_which_stays_over_the_targets_centre_while_the_hand_rises():
+    from grits_lab.evaluation.transfer import BowlEstimate, heading_rotation, plan_transfer, pour_motion
+    from grits_lab.geometry import rot6d_to_matrix
+    from grits_lab.sim.shapes import SpoonGeometry
+
+    start = np.array([0.6, -0.1, 0.12, 1, 0, 0, 0, 1, 0], dtype=np.float32)
+    target = BowlEstimate(np.array([0.45, 0.3, 0.0]), 0.058, 0.045, 100, 0.0)
+    heading = float(np.arctan2(0.3, 0.45)) + np.pi / 2
+    path = plan_transfer(start, target, [], 0.04, 0.04, 0.012, 0.036, target_heading=heading, profile="min_jerk",
+                         lip_offset=0.027, pour_axis="tip")
+    x_axis = heading_rotation(heading)[:, 0]
+    np.testing.assert_allclose(path[-1, :2], target.centre[:2] - 0.027 * x_axis[:2], atol=1e-6)  # tip over the centre
+    pour = pour_motion(path[-1], 90.0, 30, "min_jerk", axis="tip", tip=0.027)
+    rotations = [rot6d_to_matrix(p[3:9].astype(np.float64)) for p in pour]
+    tips = np.array([p[:3] + r @ np.array([0.027, 0.0, 0.0]) for p, r in zip(pour, rotations)])
+    np.testing.assert_allclose(tips, np.repeat(tips[:1], len(tips), axis=0), atol=1e-6)  # the tip stays put
+    np.testing.assert_allclose(tips[0, :2], target.centre[:2], atol=1e-6)
+    assert rotations[-1][2, 0] == pytest.approx(-1.0, abs=1e-6)  # the spoon's x axis points straight down at 90 degrees
+    grasp = SpoonGeometry().grasp_point()
+    hands = np.array([p[:3] + r @ grasp for p, r in zip(pour, rotations)])
+    assert hands[:, 2].min() > tips[0, 2] + 0.05  # the hand stays above the tip (a roll swings it 6 cm below the spoon)
+
+
+def test_the_pours_heading_alternatives_vary_fastest():
+    from grits_lab.errors import ConfigError
+    from grits_lab.evaluation.transfer import transfer_options
+    from grits_lab.task.transfer_settings import TransferSettings
+
+    settings = TransferSettings(pour_axis="tip", pour_yaw_deg=90.0, alternative_pour_yaw_deg=[-90.0],
+                                alternative_pour_heights=[0.06], alternative_pour_offsets=[])
+    first = [(o.pour_height, o.pour_yaw_deg) for o in transfer_options(settings)[:4]]
+    assert first == [(0.04, 90.0), (0.04, -90.0), (0.06, 90.0), (0.06, -90.0)]
+    assert transfer_options(TransferSettings(pour_yaw_deg=0.0))[0].describe().endswith("+0 cm out")  # no turn: as before
+    assert transfer_options(settings)[1].describe().endswith("turned -90 deg")
+    with pytest.raises(ConfigError, match="transfer.pour_axis"):
+        TransferSettings(pour_axis="pitch")
