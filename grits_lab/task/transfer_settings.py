@@ -36,7 +36,7 @@ class TransferSettings:
     heading: Literal["radial", "keep"] = "radial"
     # Height above the target bowl's rim at which the pour starts (m; negative: below it): of the
     # spoon's tip for a tip pour, of its centre for a roll. At 4 cm the tipped spoon hangs from its
-    # tip into the bowl, its back edge about 2 cm above the bowl's floor; a roll at 5 mm ends with
+    # tip into the bowl, its back edge about 1.5 cm above the bowl's floor; a roll at 5 mm ends with
     # its lower lip about 2 cm below the rim.
     pour_height: float = 0.04
     # Place the spoon so that the lip the food leaves by, not its centre, is over the target's
@@ -52,8 +52,9 @@ class TransferSettings:
     # from the robot's base). A tip pour turned 90 degrees moves the rising hand sideways, which the
     # arm follows; pointing away, it moves the hand 20 cm farther out, beyond reach for far bowls.
     pour_yaw_deg: float = 90.0
-    # Actions of the roll: 3 s, a mean 40 deg/s; at the spoon's edge (2 cm) the roll's peak
-    # accelerations are under 0.05 m/s^2, so food slides out under gravity rather than being flung.
+    # Actions of the pour: 3 s, a mean 30 deg/s (the roll's 120 degrees: 40); at the spoon's back,
+    # 6 cm from the tip, the peak accelerations are under 0.1 m/s^2, so food slides out under
+    # gravity rather than being flung.
     pour_steps: int = 30
     settle_steps: int = 15  # actions holding still after the pour before counting
     # Before moving, check the path and pour on the arm's kinematic copy (grits_lab/sim/env.py
