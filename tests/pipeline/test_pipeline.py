@@ -173,3 +173,23 @@ def test_a_sweep_stage_config_holding_a_storage_password_is_written_owner_only(t
     assert written.stat().st_mode & 0o777 == (mode or _ordinary_mode(written))
     assert yaml.safe_load(written.read_text())["storage"] == storage  # the stage runs from this file
     assert "S3cr3t" not in capsys.readouterr().err
+
+
+def test_the_report_stage_shows_every_training_runs_curves(tmp_path):
+    from grits_lab.pipeline.stages import Layout, run, wire
+    from grits_lab.training import MetricLogger
+    from tests.report.synthetic_records import plausible_run
+
+    layout = Layout(tmp_path / "pipe")
+    for run_dir in (layout.policy_dir, layout.bc_dir, layout.predictor_dir("predictor")):
+        logger = MetricLogger(run_dir, tensorboard=False)
+        logger.log(1, {"train_loss": 0.5, "lr": 1e-3, "val_loss": 0.6})
+        logger.close()
+    layout.evaluate_dir.mkdir(parents=True)
+    plausible_run(0).to_parquet(layout.evaluate_dir / "episodes.parquet", index=False)
+    config = _write(tmp_path / "report.yaml", wire("report", {}, layout, {"policy", "bc", "predictor", "evaluate", "report"}, None, None))
+    summary = run("report", config, layout, progress=False)
+    html = (layout.report_dir / "report.html").read_text()
+    assert summary["output_dir"] == str(layout.report_dir)
+    section = html.split("<h2>Training</h2>", 1)[1].split("</section>", 1)[0]
+    assert section.count("<img") == 3 and all(f"Training: {d}" in section for d in (layout.policy_dir, layout.bc_dir))
