@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pandas as pd
+import pytest
 
 from grits_lab.training import MetricLogger
 from grits_lab.training.curves import curve_panels
@@ -47,3 +48,17 @@ def test_a_sparse_validation_loss_keeps_the_log_scale_and_counts_stay_off_the_me
     loss, metrics = curves_figure(frame).axes
     assert loss.get_yscale() == "log"
     assert metrics.get_ylim()[1] < 1.0  # the AUROC's rise fills the panel
+
+
+def test_tensorboard_gets_the_same_scalars_with_the_extra_installed(tmp_path):
+    pytest.importorskip("tensorboard", reason="the tensorboard extra: pip install -e '.[tensorboard]'")
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    logger = MetricLogger(tmp_path)
+    for step in (1, 2):
+        logger.log(step, {"train_loss": 1.0 / step, "val_auroc": 0.5 + 0.1 * step})
+    logger.close()
+    events = EventAccumulator(str(tmp_path / "tensorboard"))
+    events.Reload()
+    assert [(e.step, e.value) for e in events.Scalars("train_loss")] == [(1, 1.0), (2, 0.5)]
+    assert [e.step for e in events.Scalars("val_auroc")] == [1, 2]
