@@ -22,21 +22,32 @@ misspelled module or class stops the command at once, naming `custom_methods.<na
 A config entry wins over an entry point of the same name; a built-in method's name, or a class
 inside grits_lab, is refused (the package's own methods are wired by name in methods.py).
 examples/torch_controller.py wraps a plain torch policy this way.
+
+Guidance parameters: a class whose constructor takes keyword arguments `rho` and `s` is a guided
+method, like `grits`. It is built with `rho=guidance.rho, s=guidance.s` of the evaluation config
+(so `grits-lab evaluate --override best.yaml` and each sweep trial reach it), its records carry
+them in their `rho` / `s` columns, and a sweep (grits_lab/tune) can tune them. What they do to the
+actions is the class's own business; `options` may not set them.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import inspect
 import sys
 from dataclasses import dataclass, field
 from importlib.metadata import EntryPoint, entry_points
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from grits_lab.errors import ConfigError
 
+if TYPE_CHECKING:  # annotations only
+    from grits_lab.sampling.guidance import GuidanceConfig
+
 ENTRY_POINT_GROUP = "grits_lab.methods"
 PROTOCOL = ("cloud_steps", "reset", "plan")
+GUIDANCE_PARAMETERS = ("rho", "s")  # keyword arguments of a guided controller class, from `guidance.rho` / `guidance.s`
 
 
 @dataclass
@@ -75,13 +86,32 @@ def controller_class(method: str, spec: CustomMethodConfig) -> type:
     if missing:
         raise ConfigError(f"`{key}`: {spec.controller} lacks {', '.join(missing)} of the controller protocol "
                           "(grits_lab/policies/control.py)")
+    preset = [name for name in GUIDANCE_PARAMETERS if name in spec.options]
+    if preset and not missing_guidance_parameters(cls):
+        named = " and ".join(f"`{n}`" for n in preset)
+        raise ConfigError(f"`custom_methods.{method}.options`: {named} of a guided controller {'is' if len(preset) == 1 else 'are'} "
+                          f"set by {' and '.join(f'`guidance.{n}`' for n in preset)} (a sweep sets them per trial), not by its options")
     return cls
 
 
-def build_custom_controller(method: str, spec: CustomMethodConfig) -> Any:
-    """A fresh controller of a registered method: its class called with `options`."""
+def missing_guidance_parameters(cls: type) -> list[str]:
+    """The names of GUIDANCE_PARAMETERS that the constructor of `cls` does not take by keyword
+    (a `**kwargs` catch-all does not count): empty for a guided controller class."""
     try:
-        return controller_class(method, spec)(**spec.options)
+        parameters = inspect.signature(cls).parameters
+    except (TypeError, ValueError):  # a class whose signature cannot be read takes nothing we can name
+        return list(GUIDANCE_PARAMETERS)
+    by_keyword = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    return [name for name in GUIDANCE_PARAMETERS if name not in parameters or parameters[name].kind not in by_keyword]
+
+
+def build_custom_controller(method: str, spec: CustomMethodConfig, guidance: GuidanceConfig) -> Any:
+    """A fresh controller of a registered method: its class called with `options`, and, for a
+    guided class, with `rho` and `s` from `guidance` (the evaluation config's, a sweep trial's)."""
+    cls = controller_class(method, spec)
+    guided = {} if missing_guidance_parameters(cls) else {"rho": float(guidance.rho), "s": int(guidance.s)}
+    try:
+        return cls(**spec.options, **guided)
     except TypeError as exc:
         raise ConfigError(f"`custom_methods.{method}.options`: {exc}") from None
 

@@ -32,7 +32,7 @@ from grits_lab.evaluation.evaluation_config import EvaluationConfig, load_evalua
 from grits_lab.evaluation.task_episode import evaluation_episode
 from grits_lab.evaluation.grid import EpisodeKey
 from grits_lab.evaluation.methods import (
-    METHODS, check_method_checkpoints, file_digest, guidance_columns, method_checkpoints, method_spec,
+    METHODS, check_method_checkpoints, file_digest, guidance_columns, guidance_gap, method_checkpoints, method_spec,
 )
 from grits_lab.io import ensure_writable_dir, exclusive_directory, save_parquet_atomic, write_json_atomic, write_text_atomic
 from grits_lab.records import RECORD_COLUMNS, with_protocol
@@ -312,6 +312,8 @@ def evaluate_guidance(config: EvaluationConfig, keys: list[EpisodeKey], rho: flo
                       paths: dict[str, str] | None = None, digests: dict[str, str] | None = None) -> pd.DataFrame:
     """The sweep's entry point: `method` of `config` with guidance rho, s (Algorithm 1) on `keys` -> their records.
 
+    method: a guided built-in (grits*), or a registered controller whose class takes keyword
+        arguments `rho` and `s` (grits_lab/evaluation/custom_methods.py), built with this rho and s.
     config: a loaded evaluation config; only its guidance's rho and s and the run id change, so
         every other guidance setting (gradient, step, clipping) is the evaluation's.
     keys: the episodes, with their own seeds (the sweep derives them from its own root, so no
@@ -321,10 +323,11 @@ def evaluate_guidance(config: EvaluationConfig, keys: list[EpisodeKey], rho: flo
         keep their simulators and loaded checkpoints); None: a pool made and closed here.
     paths, digests: the method's checkpoints ({key: path}) and their digests ({path: digest}) when
         the caller resolved them once; None: resolved from `config` here.
-    Raises InputError for an unknown method.
+    Raises InputError for a method that takes no guidance (guidance_gap), before any episode runs.
     """
-    if method not in METHODS:
-        raise InputError(f"unknown method {method!r}; methods: {', '.join(METHODS)}")
+    gap = guidance_gap(method, config)
+    if gap is not None:
+        raise InputError(f"method {method!r} {gap}")
     config = replace(config, run_id=run_id, guidance=replace(config.guidance, rho=float(rho), s=int(s)))
     specs = build_specs(config, keys, methods=[method], paths=None if paths is None else {method: paths}, digests=digests)
     own = executor is None

@@ -90,10 +90,34 @@ def file_digest(path: str | Path) -> str:
     return digest.hexdigest()[:16]
 
 
+GUIDED_METHODS = tuple(name for name, spec in METHODS.items() if spec.sampler == "guided")
+
+
+def guidance_gap(name: str, config: EvaluationConfig) -> str | None:
+    """None when method `name` takes its guidance (rho, s) from `config.guidance`: a guided built-in,
+    or a registered controller whose class takes keyword arguments `rho` and `s`
+    (grits_lab/evaluation/custom_methods.py). Otherwise what it lacks, worded to follow the name."""
+    from grits_lab.evaluation.custom_methods import controller_class, missing_guidance_parameters, registered_methods
+
+    if name in METHODS:
+        if METHODS[name].sampler == "guided":
+            return None
+        return f"takes no guidance parameters: of the built-in methods only {', '.join(GUIDED_METHODS)} sample with `guidance`"
+    custom = registered_methods(config.custom_methods)
+    if name not in custom:
+        return (f"is no method: neither built-in ({', '.join(METHODS)}) nor registered "
+                "(`custom_methods`, or a `grits_lab.methods` entry point)")
+    missing = missing_guidance_parameters(controller_class(name, custom[name]))
+    if not missing:
+        return None
+    named = " and ".join(f"`{m}`" for m in missing)
+    return f"takes no guidance parameters: {custom[name].controller} has no keyword argument{'s' if len(missing) > 1 else ''} {named}"
+
+
 def guidance_columns(name: str, config: EvaluationConfig) -> tuple[float, int]:
-    """(rho, s) recorded for a method: NaN / -1 for methods without guidance."""
+    """(rho, s) recorded for a method: `guidance`'s for a guided one (guidance_gap), NaN / -1 for methods without guidance."""
     spec = method_spec(name, config)
-    if spec.sampler == "guided":
+    if spec.sampler == "guided" or (spec.kind == "custom" and guidance_gap(name, config) is None):
         return float(config.guidance.rho), int(config.guidance.s)
     if spec.sampler == "posthoc":
         return float(config.posthoc.rho), -1
@@ -109,7 +133,7 @@ def build_controller(name: str, config: EvaluationConfig, paths: dict[str, str],
     if spec.kind == "custom":
         from grits_lab.evaluation.custom_methods import build_custom_controller, registered_methods
 
-        return build_custom_controller(name, registered_methods(config.custom_methods)[name])
+        return build_custom_controller(name, registered_methods(config.custom_methods)[name], config.guidance)
     if spec.kind == "expert":
         return controllers.ExpertController()
     if spec.kind == "rule_based":

@@ -13,7 +13,7 @@ replay with a video is the same episode as the one without.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -128,7 +128,7 @@ def load_run_config(run_dir: str | Path, record: dict[str, Any]) -> Any:
     from grits_lab.config import config_from_dict, load_yaml
     from grits_lab.errors import ConfigError
     from grits_lab.evaluation.evaluation_config import EvaluationConfig
-    from grits_lab.evaluation.methods import METHODS
+    from grits_lab.evaluation.methods import METHODS, guidance_gap
 
     path = Path(run_dir) / "config.yaml"
     if not path.is_file():
@@ -136,17 +136,18 @@ def load_run_config(run_dir: str | Path, record: dict[str, Any]) -> Any:
     data = dict(load_yaml(path))
     # Only the replayed method: a run directory may come from someone else, and loading the config
     # imports the controller file of every custom method it lists.
-    data["methods"] = [record["method"]]
-    sampler = METHODS[record["method"]].sampler if record["method"] in METHODS else None
+    method = record["method"]
+    data["methods"] = [method]
     rho, s = record.get("rho"), record.get("s")
-    if sampler == "guided" and not _is_nan(rho):
-        data["guidance"] = {**data.get("guidance", {}), "rho": float(rho), "s": int(s)}
-    elif sampler == "posthoc" and not _is_nan(rho):
+    if method in METHODS and METHODS[method].sampler == "posthoc" and not _is_nan(rho):
         data["posthoc"] = {**data.get("posthoc", {}), "rho": float(rho)}
     try:
-        return config_from_dict(EvaluationConfig, data)
+        config = config_from_dict(EvaluationConfig, data)
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
+    if rho is not None and not _is_nan(rho) and guidance_gap(method, config) is None:  # grits*, or a guided registered controller
+        config = replace(config, guidance=replace(config.guidance, rho=float(rho), s=int(s)))
+    return config
 
 
 def checked_checkpoints(method: str, config: Any, record: dict[str, Any]) -> dict[str, str]:

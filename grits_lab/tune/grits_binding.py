@@ -1,12 +1,17 @@
-"""The one place where the sweep runs GRITS through the evaluation layer (`grits_lab.evaluation`).
+"""The one place where the sweep runs a guided method through the evaluation layer (`grits_lab.evaluation`).
 
 The sweep sits above evaluation and calls it directly: the evaluation config is loaded once, the
 validation episodes are evaluation `EpisodeKey`s (the sweep's validation block is an evaluation
 episode grid with its own root seed, so no tuning episode is a test episode: `StudyConfig.episodes`),
 and each trial runs `grits_lab.evaluation.evaluation_run.evaluate_guidance` with its (rho, s), getting one
-evaluation record per episode (columns of grits_lab/records.py). Running GRITS goes through
+evaluation record per episode (columns of grits_lab/records.py). Running the method goes through
 `GritsEvaluator`; besides it, grits_lab.tune reads only the episode grid and the evaluation
 config's food library from the evaluation layer.
+
+`evaluation.method` is a guided built-in (grits, grits_raw, grits_pointnet2) or a controller the
+evaluation config registers (`custom_methods`, or an entry point) whose class takes keyword
+arguments `rho` and `s` (grits_lab/evaluation/custom_methods.py); any other method is refused
+before the study exists, in one line naming what it lacks (`methods.guidance_gap`).
 
 One pool per sweep process: the evaluator makes the evaluation config's executor (a Ray pool) at
 its first trial and hands it to every trial after, so each worker builds its simulator and loads
@@ -24,7 +29,7 @@ import pandas as pd
 
 from grits_lab.errors import ConfigError, InputError
 from grits_lab.evaluation.evaluation_config import EvaluationConfig, load_evaluation_config
-from grits_lab.evaluation.methods import METHODS, check_method_checkpoints, method_checkpoints
+from grits_lab.evaluation.methods import METHODS, check_method_checkpoints, guidance_gap, method_checkpoints
 from grits_lab.evaluation.evaluation_run import checkpoint_digests, evaluate_guidance
 from grits_lab.runners import Executor, make_executor
 from grits_lab.runners.executor_config import check_reachable, cluster_address
@@ -32,9 +37,15 @@ from grits_lab.tune.study_config import StudyConfig
 
 
 class GritsEvaluator:
-    """`EpisodeEvaluator` that evaluates GRITS with guidance (rho, s) on the validation episodes."""
+    """`EpisodeEvaluator` that evaluates `evaluation.method` (GRITS, or a registered guided
+    controller) with guidance (rho, s) on the validation episodes."""
 
     label = "GRITS (grits_lab.evaluation)"
+
+    @classmethod
+    def label_for(cls, method: str) -> str:
+        """What the outputs say evaluated the trials: GRITS for a built-in, never for a lab's controller."""
+        return cls.label if method in METHODS else f"registered controller {method} (grits_lab.evaluation)"
 
     def __init__(self, config: StudyConfig) -> None:
         ref = config.evaluation
@@ -46,6 +57,7 @@ class GritsEvaluator:
         self._evaluation = load_evaluation_config(ref.config, ref.overrides)
         _check_against_evaluation(self._evaluation, ref.method)
         self._method = ref.method
+        self.label = self.label_for(ref.method)
         self._paths = method_checkpoints(ref.method, self._evaluation.checkpoints)
         self._digests = checkpoint_digests({ref.method: self._paths})
         self._executor: Executor | None = None
@@ -68,8 +80,10 @@ class GritsEvaluator:
 
 
 def _check_against_evaluation(evaluation: EvaluationConfig, method: str) -> None:
-    """Before any study exists: the method's checkpoints fit together and the Ray cluster it runs on answers."""
-    if method not in METHODS:
-        raise ConfigError(f"`evaluation.method` must be one of {', '.join(METHODS)}. Got {method!r}.")
+    """Before any study exists: the method takes guidance (rho, s), its checkpoints fit together and
+    the Ray cluster it runs on answers."""
+    gap = guidance_gap(method, evaluation)
+    if gap is not None:
+        raise ConfigError(f"`evaluation.method`: {method} {gap}")
     check_method_checkpoints(method, method_checkpoints(method, evaluation.checkpoints))
     check_reachable(cluster_address(evaluation.executor))

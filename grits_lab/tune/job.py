@@ -41,7 +41,7 @@ def run_sweep(config: StudyConfig, n_trials: int | None = None, storage: str | N
         except KeyError:
             raise StorageError(f"no study named `{config.study_name}` in {where}") from None
         kind = study.user_attrs.get(EVALUATOR_ATTR, config.evaluator)
-        label = SyntheticEvaluator.label if kind == "synthetic" else GritsEvaluator.label
+        label = SyntheticEvaluator.label if kind == "synthetic" else GritsEvaluator.label_for(config.evaluation.method)
     else:
         assert evaluator is not None
         study = open_study(config, storage_obj)

@@ -142,8 +142,11 @@ NOT_OVERRIDABLE = ("run_id", "output_dir", "methods", "foods", "levels", "trials
 
 @dataclass(frozen=True)
 class EvaluationRefConfig:
-    """Where the real objective gets GRITS from: the evaluation config and the files it needs.
+    """Where the real objective gets its method from: the evaluation config and the files it needs.
 
+    `method` is a guided built-in (grits*) or a controller the evaluation config registers whose
+    class takes keyword arguments `rho` and `s`; any other is refused when the sweep starts
+    (grits_lab/tune/grits_binding.py).
     `checkpoints` lists the files (policy and predictor checkpoints) that must exist before a
     sweep starts, so a missing file fails in the first second instead of in the first trial.
     `overrides` is merged onto the evaluation config as `grits-lab evaluate --override` merges a

@@ -5,13 +5,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 import yaml
 
 from grits_lab.cli import main
 from grits_lab.config import config_from_dict
-from grits_lab.errors import ConfigError, GritsError
+from grits_lab.errors import ConfigError, GritsError, InputError
 from grits_lab.evaluation import custom_methods
 from grits_lab.evaluation.evaluation_config import EvaluationConfig
 from grits_lab.report import build_report
@@ -92,3 +93,63 @@ def test_a_class_inside_the_package_is_not_a_custom_method(tmp_path):
     inside = {"torch_mlp": {"controller": "grits_lab.policies.rule_based:RuleBasedController"}}
     with pytest.raises(ConfigError, match="inside grits_lab"):
         config_from_dict(EvaluationConfig, tiny_config(tmp_path, custom_methods=inside))
+
+
+GUIDED = {"torch_mlp_guided": {"controller": f"{EXAMPLE}:GuidedTorchPolicyController", "options": {"hidden": 16, "seed": 0}}}
+
+
+class FakeHistory:
+    ee_pose = [np.array([0.45, 0.05, 0.30, 1, 0, 0, 0, 1, 0], dtype=np.float32)]
+
+
+class FakeScene:
+    def source_bowl_position(self):
+        return np.array([0.50, 0.0, 0.10])
+
+
+def test_a_guided_controller_is_built_with_the_guidance_rho_and_s_and_records_them(tmp_path):
+    from grits_lab.evaluation.methods import build_controller, guidance_columns, guidance_gap
+
+    config = config_from_dict(EvaluationConfig, tiny_config(tmp_path, methods=["torch_mlp_guided"], custom_methods=GUIDED,
+                                                             guidance={"rho": 1.5, "s": 3}))
+    controller = build_controller("torch_mlp_guided", config, {}, lambda key, factory: factory())
+    assert (controller.rho, controller.s) == (1.5, 3)
+    assert guidance_gap("torch_mlp_guided", config) is None and guidance_columns("torch_mlp_guided", config) == (1.5, 3)
+    plain = config_from_dict(EvaluationConfig, tiny_config(tmp_path))
+    assert "has no keyword arguments `rho` and `s`" in guidance_gap("torch_mlp", plain)
+    with pytest.raises(ConfigError, match=r"custom_methods\.torch_mlp_guided\.options.*guidance\.rho"):
+        wrong = {"torch_mlp_guided": {**GUIDED["torch_mlp_guided"], "options": {"rho": 2.0}}}
+        config_from_dict(EvaluationConfig, tiny_config(tmp_path, methods=["torch_mlp_guided"], custom_methods=wrong))
+
+
+def test_the_sweeps_entry_point_refuses_a_method_without_guidance_parameters_before_any_episode(tmp_path):
+    from grits_lab.evaluation.evaluation_run import evaluate_guidance
+
+    config = config_from_dict(EvaluationConfig, tiny_config(tmp_path))
+    with pytest.raises(InputError, match="method 'torch_mlp' takes no guidance parameters: .*TorchPolicyController has no keyword"):
+        evaluate_guidance(config, [], rho=1.0, s=3, method="torch_mlp")
+    assert not (tmp_path / "run").exists()
+
+
+def test_the_example_guided_controller_pulls_the_last_s_actions_toward_the_bowl_axis_by_rho_steps():
+    cls = custom_methods.controller_class("torch_mlp_guided", custom_methods.CustomMethodConfig(**GUIDED["torch_mlp_guided"]))
+    base = custom_methods.controller_class("torch_mlp", custom_methods.CustomMethodConfig(**CUSTOM["torch_mlp"]))
+    unguided = base(hidden=16, seed=0).plan(FakeHistory(), FakeScene()).actions
+    for rho, s in ((0.0, 8), (2.0, 0)):  # no strength, or no action corrected: exactly the policy's chunk
+        np.testing.assert_array_equal(cls(rho, s, hidden=16, seed=0).plan(FakeHistory(), FakeScene()).actions, unguided)
+    guided = cls(2.0, 3, hidden=16, seed=0)
+    actions = guided.plan(FakeHistory(), FakeScene()).actions
+    np.testing.assert_array_equal(actions[:5], unguided[:5])
+    np.testing.assert_array_equal(actions[:, 2:], unguided[:, 2:])  # height and orientation untouched
+    axis = np.array([0.50, 0.0])
+    before = np.linalg.norm(unguided[5:, :2] - axis, axis=1)
+    after = np.linalg.norm(actions[5:, :2] - axis, axis=1)
+    np.testing.assert_allclose(before - after, 2.0 * guided.max_step, atol=1e-6)
+
+
+def test_replay_gives_a_guided_controller_the_records_rho_and_s(tmp_path):
+    from grits_lab.report.replay import load_run_config
+
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(tiny_config(tmp_path, methods=["torch_mlp_guided"], custom_methods=GUIDED)))
+    config = load_run_config(tmp_path, {"method": "torch_mlp_guided", "rho": 0.75, "s": 5})
+    assert (config.guidance.rho, config.guidance.s) == (0.75, 5)
