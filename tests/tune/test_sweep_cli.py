@@ -106,6 +106,7 @@ def test_a_grits_sweep_on_a_cluster_where_nothing_answers_is_refused_before_the_
     from grits_lab.tune import grits_binding
 
     monkeypatch.setattr(executor_config, "CONNECT_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(grits_binding, "method_checkpoints", lambda method, checkpoints: {})  # no trained models needed
     monkeypatch.setattr(grits_binding, "check_method_checkpoints", lambda method, paths: None)  # checked before the cluster
     monkeypatch.setenv("RAY_ADDRESS", "")  # --address sets it; restored at teardown
     address = f"127.0.0.1:{free_port()}"
