@@ -30,7 +30,7 @@ from typing import Any, Callable
 import numpy as np
 
 from grits_lab.errors import InputError
-from grits_lab.geometry import matrix_to_rot6d, rot6d_to_matrix
+from grits_lab.geometry import axis_angle_matrix, matrix_to_rot6d, rot6d_to_matrix
 from grits_lab.sim.env import interpolate_pose, matrix_to_pose9, pose9_to_matrix
 
 
@@ -191,20 +191,17 @@ def pour_motion(pose: np.ndarray, angle_deg: float, steps: int, profile: str = "
     axis "tip": about the spoon's y axis through its tip, the point `tip` metres along its +x axis,
     which stays where it is. A positive angle lowers the tip: the food slides off the lipless tip
     while the handle, and the hand on it, rise over the spoon (at 90 degrees the grasp point is
-    about 9 cm above the tip).
+    about 7 cm above the tip).
     """
     rot = rot6d_to_matrix(np.asarray(pose[3:9], dtype=np.float64))
     position = np.asarray(pose[:3], dtype=np.float64)
     pivot = position + rot[:, 0] * tip
+    turns = axis_angle_matrix([1.0, 0.0, 0.0] if axis == "roll" else [0.0, 1.0, 0.0],
+                              math.radians(angle_deg) * profile_fractions(steps, profile))
     out = []
-    for f in profile_fractions(steps, profile):
-        a = math.radians(angle_deg) * f
-        c, s = math.cos(a), math.sin(a)
-        if axis == "roll":
-            out.append(_pose(position, rot @ np.array([[1, 0, 0], [0, c, -s], [0, s, c]])))
-        else:
-            turned = rot @ np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-            out.append(_pose(pivot - turned[:, 0] * tip, turned))
+    for turn in turns:
+        turned = rot @ turn
+        out.append(_pose(position if axis == "roll" else pivot - turned[:, 0] * tip, turned))
     return np.stack(out)
 
 
