@@ -280,6 +280,17 @@ class ScoopEnv:
         self.tracker.set_stage(stage)
         self.rest_pull = stage == "scoop" if rest_pull is None else bool(rest_pull)
 
+    def set_solver_iterations(self, iterations: int | None) -> None:
+        """Constraint-solver iterations per physics step from now on (PyBullet's
+        numSolverIterations); None: `SimConfig.solver_iterations`. Every reset starts again at
+        the config's. The stages after the scoop raise it (`TransferSettings.solver_iterations`).
+        InputError outside [1, 200]; RuntimeError before `reset`."""
+        world = self._require_world()
+        n = self.config.solver_iterations if iterations is None else int(iterations)
+        if not 1 <= n <= 200:
+            raise InputError(f"solver iterations must be in [1, 200], got {n}")
+        world.client.setPhysicsEngineParameter(numSolverIterations=n)
+
     def _track(self, start: np.ndarray, target: np.ndarray, joints: np.ndarray,
                rest_pull: bool | None = None) -> Iterator[tuple[int, np.ndarray, bool]]:
         """The joint targets of one action: for each of the `ik_per_action` pieces of the pose path

@@ -94,6 +94,13 @@ class TransferSettings:
     # nothing delivered); "best" runs the option that went farthest, unreachable poses and all
     # (scoop-v3's behaviour; its joint jumps throw the load).
     no_option: Literal["hold", "best"] = "hold"
+    # Constraint-solver iterations per physics step from the lift on (None: the scoop's
+    # `sim.solver_iterations`, 30). The loaded spoon hangs from the arm's seven motors through the
+    # hand's fixed constraint; at 30 iterations that chain is not solved to rest, the still spoon
+    # trembles (0.16 mm/s) and a heap on it creeps and sheds grains that a spoon made static keeps
+    # (docs/evaluation.md, "Grains a still spoon loses"). The scoop keeps 30: its datasets and
+    # checkpoints were made with it.
+    solver_iterations: int | None = 100
 
     def __post_init__(self) -> None:
         require(self.clearance > 0, "transfer.clearance", self.clearance, "positive")
@@ -113,3 +120,5 @@ class TransferSettings:
         require(self.pour_steps >= 1, "transfer.pour_steps", self.pour_steps, "at least 1")
         require(self.level_steps >= 1, "transfer.level_steps", self.level_steps, "at least 1")
         require(self.lift_hold_steps >= 0, "transfer.lift_hold_steps", self.lift_hold_steps, "non-negative")
+        require(self.solver_iterations is None or 1 <= self.solver_iterations <= 200, "transfer.solver_iterations",
+                self.solver_iterations, "in [1, 200], or null for the scoop's")

@@ -272,6 +272,28 @@ def test_when_no_option_passes_the_arm_holds_the_spoon_instead_of_running_a_moti
     assert out["max_joint_speed_ratio"] <= 1.0
 
 
+@pytest.mark.parametrize("iterations", [100, None])
+def test_the_stages_after_the_scoop_run_at_the_transfers_solver_iterations(env, iterations):
+    from grits_lab.evaluation.evaluation_config import TransferSettings
+    from grits_lab.evaluation.task_episode import run_transfer
+
+    scene, _, _ = _scene_obstacles(env, (0.30, 0.20))
+    assert env.world.client.getPhysicsEngineParameters()["numSolverIterations"] == env.config.solver_iterations  # the scoop's
+    settings = _rolled(TransferSettings, alternative_level_steps=[], alternative_level_yaw_deg=[], alternative_pour_heights=[],
+                       alternative_pour_offsets=[], solver_iterations=iterations)
+    run_transfer(env, scene, settings)
+    expected = env.config.solver_iterations if iterations is None else iterations
+    assert env.world.client.getPhysicsEngineParameters()["numSolverIterations"] == expected
+
+
+def test_transfer_solver_iterations_outside_their_range_are_a_config_error():
+    from grits_lab.errors import ConfigError
+    from grits_lab.evaluation.evaluation_config import TransferSettings
+
+    with pytest.raises(ConfigError, match="transfer.solver_iterations"):
+        TransferSettings(solver_iterations=0)
+
+
 def test_a_lift_hold_keeps_the_lifted_spoon_still_over_the_source_bowl_before_the_carry():
     from grits_lab.evaluation.transfer import BowlEstimate, TransferOption, lift_length, option_motion
     from grits_lab.task.transfer_settings import TransferSettings
