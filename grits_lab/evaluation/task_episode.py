@@ -227,6 +227,7 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     spoon = world.spoon_geometry
     reach = math.hypot(spoon.half_length, spoon.half_width)
     current = matrix_to_pose9(scene.spoon_pose())
+    env.anchor_pose_target()  # the lift starts where the arm is commanded, not where an unreachable scoop pose lay
     max_step = settings.max_speed / env.config.control_hz
     # The robot's base stands at the world origin (grits_lab/sim/world.py): radial = away from it.
     heading = math.atan2(target.centre[1], target.centre[0]) if settings.heading == "radial" else None

@@ -280,6 +280,15 @@ class ScoopEnv:
         self.tracker.set_stage(stage)
         self.rest_pull = stage == "scoop" if rest_pull is None else bool(rest_pull)
 
+    def anchor_pose_target(self) -> None:
+        """Make the next action start from the spoon pose the arm's joint target reaches (forward
+        kinematics on the kinematic copy) instead of the pose last asked for. They differ when the
+        last action was out of reach: the arm kept its last reachable target (an IK failure) while
+        the pose asked for lay elsewhere, and the next action's path would start from there. The
+        stages after the scoop start with it (`run_transfer`). RuntimeError before `reset`."""
+        self._require_world()
+        self._pose_target = self.kinematics.forward(self._joint_target) @ np.linalg.inv(self._hand_in_spoon)
+
     def set_solver_iterations(self, iterations: int | None) -> None:
         """Constraint-solver iterations per physics step from now on (PyBullet's
         numSolverIterations); None: `SimConfig.solver_iterations`. Every reset starts again at

@@ -142,3 +142,26 @@ def test_solver_iterations_are_refused_outside_their_range_and_restored_by_a_res
         assert env.world.client.getPhysicsEngineParameters()["numSolverIterations"] == env.config.solver_iterations
     finally:
         env.close()
+
+
+def test_after_an_unreachable_pose_the_next_path_starts_where_the_arm_is_commanded():
+    """An out-of-reach action leaves the arm at its last reachable target while the pose asked for
+    lies elsewhere; `anchor_pose_target` makes the next action start from the arm's own pose, so a
+    small move is a small joint step instead of a path from the unreachable pose back to the arm."""
+    env = ScoopEnv()
+    try:
+        env.reset(seed=0, options={"food": "soybeans", "n_particles": 0})
+        here = matrix_to_pose9(env.spoon_pose())
+        far = here.copy()
+        far[0] += 2.0  # two metres farther out: beyond the arm's reach
+        info = env.step(far)[4]
+        assert info["ik_failure"]
+        nudge = here.copy()
+        nudge[2] += 0.002
+        unanchored = env.check_path(nudge[None])
+        env.anchor_pose_target()
+        anchored = env.check_path(nudge[None])
+        assert anchored.n_unreachable == 0 and anchored.max_joint_step < 0.01
+        assert unanchored.n_unreachable == 1  # the path from the unreachable pose starts out of reach
+    finally:
+        env.close()
