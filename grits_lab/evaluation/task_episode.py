@@ -204,7 +204,8 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     """Stages 2 and 3: locate the target, lift, carry the spoon level, pour, settle; returns the measurements.
 
     Each action runs under its stage's name (`ScoopEnv.set_stage`: lift, carry, pour, after_pour),
-    so every particle spilled is attributed to the stage that lost it, and at
+    so every particle spilled is attributed to the stage that lost it. The stages start from the
+    pose the arm is commanded to (`ScoopEnv.anchor_pose_target`) and run at
     `settings.solver_iterations` (`ScoopEnv.set_solver_iterations`). Besides the metrics:
     "ik_failures" (actions of the transfer and pour whose pose the arm could not reach),
     "max_joint_step_rad" (the largest change of a commanded joint angle in one action, rad) and

@@ -326,8 +326,8 @@ def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[O
     whether the arm cannot reach it and how fast it moves its joints. With `settings.slow_to_limits`
     each option is first slowed (`slow_to_limits`) until no action moves a joint faster than the
     Panda's velocity limit; it passes when that succeeds and no action after the first is
-    unreachable (the first starts from the scoop's last command, which the arm may have stopped
-    short of). Without it, an option passes when no action steps a joint more than
+    unreachable (the first goes from where the scoop left the arm to the measured spoon pose: what
+    the arm touches or misses there is the scoop's doing, not the plan's). Without it, an option passes when no action steps a joint more than
     `settings.max_joint_step` rad. The first option (`transfer_options`) that passes is taken; a lift
     that fails while rising skips its other pours. After `settings.max_checks` options without a
     pass, the one with the smallest joint step, then the fewest unreachable actions, is taken,
@@ -354,7 +354,7 @@ def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[O
         unreachable = answer.unreachable.copy()
         if settings.avoid_arm_contact and answer.touches is not None:  # an arm that would strike the table or a bowl
             unreachable |= answer.touches
-        unreachable[0] = False
+        unreachable[0] = False  # where the scoop left the arm (see above)
         bad = bad | unreachable
         plan = TransferPlan(actions, stages, option, not bad.any(), n_checks)
         if plan.reachable:

@@ -281,9 +281,20 @@ def test_the_stages_after_the_scoop_run_at_the_transfers_solver_iterations(env, 
     assert env.world.client.getPhysicsEngineParameters()["numSolverIterations"] == env.config.solver_iterations  # the scoop's
     settings = _rolled(TransferSettings, alternative_level_steps=[], alternative_level_yaw_deg=[], alternative_pour_heights=[],
                        alternative_pour_offsets=[], solver_iterations=iterations)
-    run_transfer(env, scene, settings)
+    seen = []
+    original = env.step
+
+    def step(action):  # the setting every action of the transfer runs under, read as it starts
+        seen.append(env.world.client.getPhysicsEngineParameters()["numSolverIterations"])
+        return original(action)
+
+    env.step = step
+    try:
+        run_transfer(env, scene, settings)
+    finally:
+        del env.step
     expected = env.config.solver_iterations if iterations is None else iterations
-    assert env.world.client.getPhysicsEngineParameters()["numSolverIterations"] == expected
+    assert seen and set(seen) == {expected}
 
 
 def test_transfer_solver_iterations_outside_their_range_are_a_config_error():
