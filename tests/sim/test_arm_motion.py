@@ -9,7 +9,7 @@ import pytest
 
 from grits_lab.sim import ScoopEnv, SimConfig
 from grits_lab.sim.env import ARM_CLEARANCE, matrix_to_pose9
-from grits_lab.sim.expert import nominal_expert_trajectory
+from grits_lab.sim.still_spoon import hold_heaped_spoon
 
 
 def spoon_accelerations(joint_command: str) -> np.ndarray:
@@ -76,41 +76,6 @@ def test_a_path_through_the_table_is_foreseen_on_the_kinematic_copy(env):
     assert not check.touches[0] and check.touches[-1]
 
 
-def heap_moves(iterations: int | None) -> np.ndarray:
-    """(N,) metres each particle on a heaped spoon moved, in the spoon's frame, while the arm held
-    the spoon still for 4 s at `iterations` solver iterations (None: the scoop's). The heap is the
-    scripted expert's on red beans at the high level (seed 0): about 30 particles, half of them
-    above the spoon's rim, lifted 10 cm out of the bowl; the same world and heap for every `iterations`."""
-    env = ScoopEnv()
-    try:
-        env.reset(seed=0, options={"food": "red_bean", "level": "high"})
-        for action in nominal_expert_trajectory(env.scene(), env.config.control_hz):
-            env.step(action)
-        lifted = action.copy()
-        for k in range(1, 11):
-            lifted = action.copy()
-            lifted[2] += 0.01 * k
-            env.step(lifted)
-        for _ in range(20):
-            env.step(lifted)
-        world, spoon = env.world, env.spoon_geometry
-
-        def in_spoon_frame() -> np.ndarray:
-            m = world.spoon_matrix()
-            return (world.particle_positions() - m[:3, 3]) @ m[:3, :3]
-
-        start = in_spoon_frame()
-        on = (np.abs(start[:, 0]) < spoon.half_length + 0.012) & (np.abs(start[:, 1]) < spoon.half_width + 0.012) & \
-            (start[:, 2] > -0.01) & (start[:, 2] < 0.05)
-        assert on.sum() >= 20 and env.metrics()["above_spoon_rim"] >= 10, "the expert's scoop no longer heaps the spoon"
-        env.set_solver_iterations(iterations)
-        for _ in range(40):
-            env.step(lifted)
-        return np.linalg.norm(in_spoon_frame()[on] - start[on], axis=1)
-    finally:
-        env.close()
-
-
 def test_a_still_heaped_spoon_keeps_its_heap_at_the_transfers_solver_iterations():
     """A heap on a spoon the arm holds still does not move on a real spoon. At the scoop's 30
     iterations the arm-spoon chain is not solved to rest and nearly every grain creeps (millimetres
@@ -118,8 +83,10 @@ def test_a_still_heaped_spoon_keeps_its_heap_at_the_transfers_solver_iterations(
     heap holds as it does on the same spoon made static."""
     from grits_lab.task.transfer_settings import TransferSettings
 
-    unconverged = heap_moves(None)
-    converged = heap_moves(TransferSettings().solver_iterations)
+    unconverged = hold_heaped_spoon("red_bean", "high", 0)["moved"]
+    held = hold_heaped_spoon("red_bean", "high", 0, iterations=TransferSettings().solver_iterations)
+    assert len(held["moved"]) >= 20 and held["above_spoon_rim"] >= 10, "the expert's scoop no longer heaps the spoon"
+    converged = held["moved"]
     assert np.mean(unconverged > 0.001) > 0.8  # the artefact the setting removes is there at 30
     assert np.mean(converged > 0.001) < 0.5 * np.mean(unconverged > 0.001)
     assert np.median(converged) < 0.3 * np.median(unconverged)
