@@ -322,6 +322,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         "scoop_max_joint_speed_ratio": float(m["max_joint_speed_ratio"]),
         "scoop_arm_contact_steps": int(m["arm_contact_steps"]),
         "above_spoon_rim": int(m["above_spoon_rim"]),
+        "scoop_sunk_below_table": int(m["sunk_below_table"]),
         "n_plans": scoop["n_plans"],
         "plan_time_mean_s": scoop["plan_time_mean_s"],
         "plan_time_max_s": scoop["plan_time_max_s"],
@@ -356,6 +357,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         "task_success": bool(m["scoop_success"]) and transferred >= needed and spilled_total == 0,
     })
     record["delivered_fraction"] = transferred / int(m["scooped"]) if int(m["scooped"]) else math.nan
+    record["sunk_below_table"] = int(final["sunk_below_table"])  # at the episode's end (ScoopEnv.metrics)
     record.update(final["spill_attribution"])
     if record_chunks:
         n_exec = config.scoop.n_action_steps or getattr(controller, "n_action_steps", None) or 12

@@ -25,7 +25,7 @@ from grits_lab.sim.foods import FoodSpec, level_count, load_foods, sample_partic
 from grits_lab.sim.spill_metrics import COVERAGE_THRESHOLD, SpillTracker, above_spoon_rim, classify, fill_height, spoon_coverage
 from grits_lab.sim.robot import REST_POSE, PandaKinematics, joint_speed_ratio, pose_to_matrix, spoon_in_hand
 from grits_lab.sim.shapes import TARGET_BOWL, BowlGeometry, SpoonGeometry
-from grits_lab.sim.world import World, build_static_scene, build_world, settle
+from grits_lab.sim.world import TABLE_TOP, World, build_static_scene, build_world, settle
 
 DEFAULT_FOOD = "mung_beans"
 # Metres the arm's links keep from the table and the bowls on a checked path (`check_path`): a
@@ -436,6 +436,9 @@ class ScoopEnv:
             "first_spill_step": self.tracker.first_spill_step,
             "spill_attribution": self.tracker.attribution(counts),
             "above_spoon_rim": int((counts.lifted & above_spoon_rim(positions, spoon, self.spoon_geometry)).sum()),
+            # particles whose centre lies below the table's top: passed through a bowl's floor or the
+            # table, which no real food does (a simulation fault; outside a bowl they count as spilled)
+            "sunk_below_table": int((positions[:, 2] < TABLE_TOP).sum()),
             "ik_failures": self.ik_failures,
             "max_joint_speed_ratio": self.max_joint_speed_ratio,
             "arm_contact_steps": self.arm_contact_steps,  # actions that ended with the arm touching the table or a bowl

@@ -34,6 +34,7 @@ from grits_lab.sim.shapes import TARGET_BOWL, Box, BowlGeometry, SpoonGeometry, 
 
 TABLE_HALF = (0.45, 0.6, 0.02)
 TABLE_CENTER = (0.45, 0.0, -0.02)
+TABLE_TOP = TABLE_CENTER[2] + TABLE_HALF[2]  # world z of the table's top, 0
 BOWL_COLOR = (0.92, 0.92, 0.88, 1.0)
 TARGET_COLOR = (0.55, 0.75, 0.95, 1.0)
 SPOON_COLOR = (0.75, 0.76, 0.8, 1.0)
