@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import grits_lab.sim  # noqa: F401  (registers grits_lab/Scoop-v4)
+import grits_lab.sim  # noqa: F401  (registers the Gymnasium env, grits_lab.sim.ENV_ID)
 from grits_lab.errors import InputError
 from grits_lab.sim import ENV_ID, ScoopEnv, ScoopGymEnv, nominal_expert_trajectory
 from grits_lab.sim.foods import level_count, load_foods
