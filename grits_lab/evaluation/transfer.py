@@ -327,8 +327,8 @@ def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[O
     each option is first slowed (`slow_to_limits`) until no action moves a joint faster than the
     Panda's velocity limit; it passes when that succeeds and no action after the first is
     unreachable (the first goes from where the scoop left the arm to the measured spoon pose: what
-    the arm touches or misses there is the scoop's doing, not the plan's). Without it, an option passes when no action steps a joint more than
-    `settings.max_joint_step` rad. The first option (`transfer_options`) that passes is taken; a lift
+    the arm touches or misses there is the scoop's doing, not the plan's). Without it, an option
+    passes when no action steps a joint more than `settings.max_joint_step` rad. The first option (`transfer_options`) that passes is taken; a lift
     that fails while rising skips its other pours. After `settings.max_checks` options without a
     pass, the one with the smallest joint step, then the fewest unreachable actions, is taken,
     with `reachable` False.

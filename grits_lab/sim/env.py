@@ -20,7 +20,7 @@ from grits_lab.errors import InputError
 from grits_lab.geometry import matrix_to_rot6d, rot6d_to_matrix
 from grits_lab.seeding import derive_seed, make_rng
 from grits_lab.sim.cameras import CameraImage, render
-from grits_lab.sim.sim_config import SimConfig
+from grits_lab.sim.sim_config import MAX_SOLVER_ITERATIONS, SimConfig
 from grits_lab.sim.foods import FoodSpec, level_count, load_foods, sample_particles
 from grits_lab.sim.spill_metrics import COVERAGE_THRESHOLD, SpillTracker, above_spoon_rim, classify, fill_height, spoon_coverage
 from grits_lab.sim.robot import REST_POSE, PandaKinematics, joint_speed_ratio, pose_to_matrix, spoon_in_hand
@@ -296,8 +296,8 @@ class ScoopEnv:
         InputError outside [1, 200]; RuntimeError before `reset`."""
         world = self._require_world()
         n = self.config.solver_iterations if iterations is None else int(iterations)
-        if not 1 <= n <= 200:
-            raise InputError(f"solver iterations must be in [1, 200], got {n}")
+        if not 1 <= n <= MAX_SOLVER_ITERATIONS:
+            raise InputError(f"solver iterations must be in [1, {MAX_SOLVER_ITERATIONS}], got {n}")
         world.client.setPhysicsEngineParameter(numSolverIterations=n)
 
     def _track(self, start: np.ndarray, target: np.ndarray, joints: np.ndarray,

@@ -37,6 +37,9 @@ def _default_cameras() -> list[CameraConfig]:
     ]
 
 
+MAX_SOLVER_ITERATIONS = 200  # the most constraint-solver iterations per physics step a config may ask for
+
+
 @dataclass
 class SimConfig:
     """Everything that shapes an episode besides the food and the seed.
@@ -93,7 +96,8 @@ class SimConfig:
         require(1e-4 <= self.time_step <= 0.02, "time_step", self.time_step, "in [0.0001, 0.02] seconds")
         require(0 < self.contact_breaking_threshold <= 0.05, "contact_breaking_threshold", self.contact_breaking_threshold, "in (0, 0.05] metres")
         require(self.freeze_distance is None or self.freeze_distance > 0, "freeze_distance", self.freeze_distance, "positive metres, or null")
-        require(1 <= self.solver_iterations <= 200, "solver_iterations", self.solver_iterations, "in [1, 200]")
+        require(1 <= self.solver_iterations <= MAX_SOLVER_ITERATIONS, "solver_iterations", self.solver_iterations,
+                f"in [1, {MAX_SOLVER_ITERATIONS}]")
         require(0 < self.control_hz <= 100, "control_hz", self.control_hz, "in (0, 100]")
         require(self.ik_per_action >= 1, "ik_per_action", self.ik_per_action, ">= 1")
         require(0 < self.settle_min_s <= self.settle_max_s, "settle_min_s", self.settle_min_s, "in (0, settle_max_s]")

@@ -41,8 +41,13 @@ class ParticleCounts:
     in_source: np.ndarray  # inside the source bowl: within its outer rim radius, below its rim
 
 
+def in_spoon_frame(positions: np.ndarray, spoon_pose: np.ndarray) -> np.ndarray:
+    """(N, 3) world points `positions` expressed in the spoon frame of the (4, 4) `spoon_pose`."""
+    return (positions - spoon_pose[:3, 3]) @ spoon_pose[:3, :3]
+
+
 def in_spoon_mask(positions: np.ndarray, spoon_pose: np.ndarray, spoon: SpoonGeometry) -> np.ndarray:
-    local = (positions - spoon_pose[:3, 3]) @ spoon_pose[:3, :3]
+    local = in_spoon_frame(positions, spoon_pose)
     a = spoon.half_length + SPOON_RIM_MARGIN
     b = spoon.half_width + SPOON_RIM_MARGIN
     inside = (local[:, 0] / a) ** 2 + (local[:, 1] / b) ** 2 <= 1.0
@@ -52,7 +57,7 @@ def in_spoon_mask(positions: np.ndarray, spoon_pose: np.ndarray, spoon: SpoonGeo
 def above_spoon_rim(positions: np.ndarray, spoon_pose: np.ndarray, spoon: SpoonGeometry) -> np.ndarray:
     """(N,) particles whose centre is higher above the spoon's floor than its rim: the heap a
     loaded spoon carries above its rim, which a carry can shed."""
-    local = (positions - spoon_pose[:3, 3]) @ spoon_pose[:3, :3]
+    local = in_spoon_frame(positions, spoon_pose)
     return local[:, 2] > spoon.rim_height
 
 
@@ -106,7 +111,7 @@ def spoon_coverage(positions: np.ndarray, radii: np.ndarray, spoon_pose: np.ndar
     gx, gy = np.meshgrid(xs, ys, indexing="ij")
     cells = (gx / spoon.half_length) ** 2 + (gy / spoon.half_width) ** 2 <= 1.0
     px, py = gx[cells], gy[cells]
-    local = (positions - spoon_pose[:3, 3]) @ spoon_pose[:3, :3]
+    local = in_spoon_frame(positions, spoon_pose)
     d2 = (px[:, None] - local[None, :, 0]) ** 2 + (py[:, None] - local[None, :, 1]) ** 2
     covered = (d2 <= radii[None, :] ** 2).any(axis=1)
     return float(covered.mean())

@@ -17,6 +17,7 @@ import numpy as np
 from grits_lab.sim.env import ScoopEnv
 from grits_lab.sim.expert import nominal_expert_trajectory
 from grits_lab.sim.sim_config import SimConfig
+from grits_lab.sim.spill_metrics import in_spoon_frame
 
 LIFT_ACTIONS = 10  # 1 cm per action, straight up, keeping the scoop's last orientation
 SETTLE_ACTIONS = 20  # the lifted spoon held still before the watch starts
@@ -51,11 +52,10 @@ def hold_heaped_spoon(food: str, level: str, seed: int, *, iterations: int | Non
             env.step(lifted)
         world, spoon = env.world, env.spoon_geometry
 
-        def in_spoon_frame() -> np.ndarray:
-            m = world.spoon_matrix()
-            return (world.particle_positions() - m[:3, 3]) @ m[:3, :3]
+        def grains() -> np.ndarray:
+            return in_spoon_frame(world.particle_positions(), world.spoon_matrix())
 
-        start = in_spoon_frame()
+        start = grains()
         near = (np.abs(start[:, 0]) < spoon.half_length + 0.012) & (np.abs(start[:, 1]) < spoon.half_width + 0.012) & \
             (start[:, 2] > -0.01) & (start[:, 2] < 0.05)
         metrics = env.metrics()
@@ -68,7 +68,7 @@ def hold_heaped_spoon(food: str, level: str, seed: int, *, iterations: int | Non
             client.resetBaseVelocity(world.spoon, [0, 0, 0], [0, 0, 0])
         for _ in range(hold_actions):
             env.step(lifted)
-        return {"moved": np.linalg.norm(in_spoon_frame()[near] - start[near], axis=1),
+        return {"moved": np.linalg.norm(grains()[near] - start[near], axis=1),
                 "scooped": int(metrics["scooped"]), "above_spoon_rim": int(metrics["above_spoon_rim"])}
     finally:
         env.close()

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from grits_lab.config import require
+from grits_lab.sim.sim_config import MAX_SOLVER_ITERATIONS
 
 
 @dataclass
@@ -120,5 +121,5 @@ class TransferSettings:
         require(self.pour_steps >= 1, "transfer.pour_steps", self.pour_steps, "at least 1")
         require(self.level_steps >= 1, "transfer.level_steps", self.level_steps, "at least 1")
         require(self.lift_hold_steps >= 0, "transfer.lift_hold_steps", self.lift_hold_steps, "non-negative")
-        require(self.solver_iterations is None or 1 <= self.solver_iterations <= 200, "transfer.solver_iterations",
-                self.solver_iterations, "in [1, 200], or null for the scoop's")
+        require(self.solver_iterations is None or 1 <= self.solver_iterations <= MAX_SOLVER_ITERATIONS,
+                "transfer.solver_iterations", self.solver_iterations, f"in [1, {MAX_SOLVER_ITERATIONS}], or null for the scoop's")
