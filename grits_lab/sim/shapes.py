@@ -145,15 +145,28 @@ def _ellipse_strips(half_x: float, half_y: float, thickness: float, z: float, st
     return boxes
 
 
-def bowl_boxes(g: BowlGeometry) -> list[Box]:
-    """Boxes whose union is the bowl: a 12-gon floor (three rotated squares) and slanted wall segments.
+def bowl_boxes(g: BowlGeometry, support_depth: float = 0.0) -> list[Box]:
+    """Boxes whose union is the bowl: a floor of 7 strips and slanted wall segments.
 
     The wall boxes reach below the floor's top and overlap their neighbours at the outer face, so
     no seam is wide enough for a particle to leak through.
+
+    `support_depth` (m, >= 0) extends the floor's boxes that far below the bowl's bottom (z = 0),
+    into the table it stands on; the inner floor stays at z = `floor_thickness`. The simulator's
+    collision bowls use the table's thickness (world.BOWL_SUPPORT_DEPTH): Bullet resolves a deep
+    contact towards the nearer face of a box, so a disc pressed more than half way into a 6 mm
+    floor was pushed out through its underside and sank (docs/sim.md, "Floors that hold"). The
+    bowl's own shape (assets/, the perception's CAD points) keeps the default 0.
+
+    Raises:
+        ValueError: `support_depth` < 0.
     """
+    if support_depth < 0:
+        raise ValueError(f"support_depth must be >= 0 metres, got {support_depth}")
     boxes: list[Box] = []
+    floor_height = g.floor_thickness + support_depth
     boxes += _ellipse_strips(g.floor_radius + g.wall_thickness * 0.6, g.floor_radius + g.wall_thickness * 0.6,
-                             g.floor_thickness, g.floor_thickness / 2, strips=7)
+                             floor_height, g.floor_thickness - floor_height / 2, strips=7)
     a = g.slant_angle
     wall_len = math.hypot(g.rim_radius - g.floor_radius, g.depth - g.floor_thickness)
     extra = g.floor_thickness  # reach into the floor

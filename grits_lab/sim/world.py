@@ -35,6 +35,9 @@ from grits_lab.sim.shapes import TARGET_BOWL, Box, BowlGeometry, SpoonGeometry, 
 TABLE_HALF = (0.45, 0.6, 0.02)
 TABLE_CENTER = (0.45, 0.0, -0.02)
 TABLE_TOP = TABLE_CENTER[2] + TABLE_HALF[2]  # world z of the table's top, 0
+# How far the bowls' collision floors reach below the table's top: through the table, so that floor
+# and table act as one solid support (shapes.bowl_boxes; protocol scoop-v8).
+BOWL_SUPPORT_DEPTH = 2 * TABLE_HALF[2]
 BOWL_COLOR = (0.92, 0.92, 0.88, 1.0)
 TARGET_COLOR = (0.55, 0.75, 0.95, 1.0)
 SPOON_COLOR = (0.75, 0.76, 0.8, 1.0)
@@ -238,8 +241,8 @@ def build_static_scene(client: BulletClient, source_position: np.ndarray, target
         client.createVisualShape(pb.GEOM_BOX, halfExtents=TABLE_HALF, rgbaColor=[0.6, 0.45, 0.3, 1]),
         basePosition=TABLE_CENTER,
     )
-    source_bowl = create_static_boxes(client, bowl_boxes(BowlGeometry()), source_position, BOWL_COLOR)
-    target_bowl = create_static_boxes(client, bowl_boxes(TARGET_BOWL), target_position, TARGET_COLOR)
+    source_bowl = create_static_boxes(client, bowl_boxes(BowlGeometry(), BOWL_SUPPORT_DEPTH), source_position, BOWL_COLOR)
+    target_bowl = create_static_boxes(client, bowl_boxes(TARGET_BOWL, BOWL_SUPPORT_DEPTH), target_position, TARGET_COLOR)
     return table, source_bowl, target_bowl
 
 

@@ -80,3 +80,61 @@ def test_asset_meshes_match_the_simulated_geometry(name, boxes):
     stored_f = np.array([[int(x) - 1 for x in ln.split()[1:]] for ln in lines if ln.startswith("f ")])
     assert stored_v.shape == vertices.shape, "regenerate with `python assets/make_assets.py`"
     assert np.allclose(stored_v, vertices, atol=2e-6) and np.array_equal(stored_f, faces)
+
+
+def _discs_below_table(support_depth: float) -> int:
+    """40 mentos-sized discs (r 8.25 mm, 7.5 mm thick, 2.75 g) dropped 12-20 cm into the target
+    bowl on the table, at the world's physics settings; how many end with their centre below the
+    table's top after 3 s."""
+    from grits_lab.sim.sim_config import SimConfig
+    from grits_lab.sim.world import TABLE_CENTER, TABLE_HALF, TABLE_TOP
+
+    cfg = SimConfig()
+    c = connect_direct()
+    try:
+        c.setPhysicsEngineParameter(fixedTimeStep=cfg.time_step, numSolverIterations=cfg.solver_iterations, numSubSteps=0,
+                                    deterministicOverlappingPairs=1, contactBreakingThreshold=cfg.contact_breaking_threshold)
+        c.setGravity(0, 0, -9.81)
+        centre = np.array([TABLE_CENTER[0], TABLE_CENTER[1], TABLE_TOP])
+        create_static_boxes(c, bowl_boxes(TARGET_BOWL, support_depth), centre, (1, 1, 1, 1))
+        c.createMultiBody(0, c.createCollisionShape(pb.GEOM_BOX, halfExtents=TABLE_HALF), -1, basePosition=TABLE_CENTER)
+        disc = c.createCollisionShape(pb.GEOM_CYLINDER, radius=0.00825, height=0.0075)
+        rng = np.random.default_rng(0)
+        bodies = []
+        for k in range(40):
+            x, y = rng.uniform(-0.025, 0.025, 2)
+            q = pb.getQuaternionFromEuler(rng.uniform(-0.6, 0.6, 3).tolist())
+            b = c.createMultiBody(0.00275, disc, -1, basePosition=(centre + [x, y, 0.12 + 0.012 * (k % 8)]).tolist(), baseOrientation=q)
+            c.changeDynamics(b, -1, lateralFriction=0.35, rollingFriction=0.0015, spinningFriction=0.0015, restitution=0.15)
+            bodies.append(b)
+        for _ in range(int(round(3.0 / cfg.time_step))):
+            c.stepSimulation()
+        z = np.array([c.getBasePositionAndOrientation(b)[0][2] for b in bodies])
+        return int((z < TABLE_TOP).sum())
+    finally:
+        c.disconnect()
+
+
+def test_a_floor_through_the_table_holds_dropped_discs():
+    from grits_lab.sim.world import BOWL_SUPPORT_DEPTH, TABLE_HALF
+
+    assert BOWL_SUPPORT_DEPTH == pytest.approx(2 * TABLE_HALF[2])
+    # The world's floors: no disc passes through.
+    assert _discs_below_table(BOWL_SUPPORT_DEPTH) == 0
+    # The 6 mm floor alone (scoop-v7 and earlier) lets many through: the case the support fixes.
+    assert _discs_below_table(0.0) >= 5
+
+
+def test_the_support_extends_only_the_floor_downwards():
+    plain, supported = bowl_boxes(BowlGeometry()), bowl_boxes(BowlGeometry(), 0.04)
+    assert len(plain) == len(supported)
+    for a, b in zip(plain, supported):
+        top_a = a.position[2] + a.half_extents[2]
+        top_b = b.position[2] + b.half_extents[2]
+        if a == b:
+            continue  # walls are unchanged
+        assert top_b == pytest.approx(top_a) == pytest.approx(BowlGeometry().floor_thickness)
+        assert b.position[2] - b.half_extents[2] == pytest.approx(-0.04)
+    assert sum(a != b for a, b in zip(plain, supported)) == 7  # the floor's strips
+    with pytest.raises(ValueError, match="support_depth"):
+        bowl_boxes(BowlGeometry(), -0.01)
