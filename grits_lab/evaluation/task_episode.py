@@ -320,6 +320,8 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         "scoop_stop_reason": scoop["stop_reason"],
         "ik_failures": int(m["ik_failures"]),
         "scoop_max_joint_speed_ratio": float(m["max_joint_speed_ratio"]),
+        "scoop_slowed_actions": int(m["slowed_actions"]),
+        "scoop_action_time_s": float(m["action_time_s"]),
         "scoop_arm_contact_steps": int(m["arm_contact_steps"]),
         "above_spoon_rim": int(m["above_spoon_rim"]),
         "scoop_sunk_below_table": int(m["sunk_below_table"]),
@@ -333,7 +335,8 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
     record.update({"target_locate_error_m": math.nan, "target_fit_residual_m": math.nan, "spilled_transfer": 0,
                    "transfer_ik_failures": 0, "transfer_max_joint_step_rad": math.nan, "transfer_max_joint_speed_ratio": math.nan,
                    "transfer_plan": "", "transfer_reachable": None, "transfer_checks": 0, "pour_steps": 0,
-                   "carry_peak_speed_mps": math.nan, "carry_peak_accel_mps2": math.nan, "transfer_arm_contact_steps": 0})
+                   "carry_peak_speed_mps": math.nan, "carry_peak_accel_mps2": math.nan, "transfer_arm_contact_steps": 0,
+                   "transfer_slowed_actions": 0})
     if config.transfer.enabled and m["scooped"] > 0:
         t0 = time.perf_counter()
         tr = run_transfer(env, scene, config.transfer)
@@ -347,7 +350,8 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
                        "transfer_max_joint_speed_ratio": tr["max_joint_speed_ratio"], "pour_steps": tr["pour_steps"],
                        "transfer_plan": tr["plan"], "transfer_reachable": tr["reachable"], "transfer_checks": tr["checks"],
                        "carry_peak_speed_mps": tr["carry_peak_speed_mps"], "carry_peak_accel_mps2": tr["carry_peak_accel_mps2"],
-                       "transfer_arm_contact_steps": int(final["arm_contact_steps"]) - int(m["arm_contact_steps"])})
+                       "transfer_arm_contact_steps": int(final["arm_contact_steps"]) - int(m["arm_contact_steps"]),
+                       "transfer_slowed_actions": int(final["slowed_actions"]) - int(m["slowed_actions"])})
     needed = 1 if env.food.success_rule == "items" else max(1, math.ceil(0.5 * int(m["scooped"])))
     record.update({
         "transferred": transferred,

@@ -466,8 +466,9 @@ def failure_table(episodes: pd.DataFrame | None) -> ReportTable:
         "action whose pose the arm could not reach (`transfer_ik_failures`); the IK may then find the pose in "
         "another arm posture, and the flip throws the load. The first action of a checked transfer may be one: it "
         "starts from the scoop's last command, which the arm may have stopped short of.",
-        "Posture flips: transfers in which a commanded joint moved faster than the Panda's velocity limit "
-        "(`transfer_max_joint_speed_ratio` > 1: 0.22-0.26 rad in one 0.1 s action); for records that predate it, "
+        "Posture flips: transfers with an action that asked a joint to move faster than the Panda's velocity limit "
+        "(`transfer_max_joint_speed_ratio` > 1: 0.22-0.26 rad in one 0.1 s action; from scoop-v8 on such an action is "
+        "slowed to the limit, `sim.joint_speed_cap`); for records that predate it, "
         f"more than {POSTURE_FLIP_RAD} rad in one action (`transfer_max_joint_step_rad`; the flips measured 0.5-1.8 rad).",
         "Spills after the scoop, by stage: episodes with a particle lost in the lift, the carry, the pour and after the "
         "pour (an episode may lose food in more than one); the next table gives the causes.",

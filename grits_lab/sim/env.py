@@ -23,7 +23,7 @@ from grits_lab.sim.cameras import CameraImage, render
 from grits_lab.sim.sim_config import MAX_SOLVER_ITERATIONS, SimConfig
 from grits_lab.sim.foods import FoodSpec, level_count, load_foods, sample_particles
 from grits_lab.sim.spill_metrics import COVERAGE_THRESHOLD, SpillTracker, above_spoon_rim, classify, fill_height, spoon_coverage
-from grits_lab.sim.robot import REST_POSE, PandaKinematics, joint_speed_ratio, pose_to_matrix, spoon_in_hand
+from grits_lab.sim.robot import REST_POSE, PandaKinematics, joint_speed_ratio, pose_to_matrix, slowed_steps, spoon_in_hand
 from grits_lab.sim.shapes import TARGET_BOWL, BowlGeometry, SpoonGeometry
 from grits_lab.sim.world import TABLE_TOP, World, build_static_scene, build_world, settle
 
@@ -201,6 +201,8 @@ class ScoopEnv:
         self.step_count = 0
         self.ik_failures = 0
         self.max_joint_speed_ratio = 0.0
+        self.slowed_actions = 0
+        self.action_time_s = 0.0
         self.arm_contact_steps = 0
         self.rest_pull = True
         counts = self._classify()
@@ -236,26 +238,31 @@ class ScoopEnv:
         steps = cfg.substeps
         joints_before = self._joint_target.copy()
         failed = False
-        done = 0
+        done = executed = 0
         for k, joints, reached in self._track(start, target, self._joint_target):
             failed |= not reached
             n = (steps * (k + 1)) // pieces - done
-            self._follow(world, self._joint_target, joints, n)
-            self._joint_target = joints
             done += n
+            n_run = slowed_steps(joints - self._joint_target, n, cfg.time_step, cfg.joint_speed_cap)
+            self._follow(world, self._joint_target, joints, n_run)
+            self._joint_target = joints
+            executed += n_run
         self._pose_target = target
         self.step_count += 1
         self.ik_failures += int(failed)
+        self.slowed_actions += int(executed > steps)
+        self.action_time_s += executed * cfg.time_step
         delta = self._joint_target - joints_before
         joint_step = float(np.abs(delta).max())
         speed_ratio = joint_speed_ratio(delta, cfg.control_hz)
+        executed_ratio = speed_ratio * steps / executed  # the speed the arm was commanded at, on average over the action
         self.max_joint_speed_ratio = max(self.max_joint_speed_ratio, speed_ratio)
         self.arm_contact_steps += int(world.arm_touches_static())
         before = self.tracker.history[-1] if self.tracker.history else 0
-        spilled = self.tracker.update(self._classify(), thrown=speed_ratio > 1.0)
+        spilled = self.tracker.update(self._classify(), thrown=executed_ratio > 1.0)
         truncated = self.step_count >= cfg.max_episode_steps
-        return self._obs(), -float(spilled - before), False, truncated, self._info(ik_failure=failed, joint_step=joint_step,
-                                                                                  joint_speed_ratio=speed_ratio)
+        return self._obs(), -float(spilled - before), False, truncated, self._info(
+            ik_failure=failed, joint_step=joint_step, joint_speed_ratio=speed_ratio, slowdown=executed / steps)
 
     def _follow(self, world: World, previous: np.ndarray, joints: np.ndarray, n: int) -> None:
         """Move the arm's joint targets from `previous` to `joints` (7,) over `n` physics steps, as
@@ -440,7 +447,9 @@ class ScoopEnv:
             # table, which no real food does (a simulation fault; outside a bowl they count as spilled)
             "sunk_below_table": int((positions[:, 2] < TABLE_TOP).sum()),
             "ik_failures": self.ik_failures,
-            "max_joint_speed_ratio": self.max_joint_speed_ratio,
+            "max_joint_speed_ratio": self.max_joint_speed_ratio,  # the largest an action asked for (see _info)
+            "slowed_actions": self.slowed_actions,  # actions slowed to SimConfig.joint_speed_cap
+            "action_time_s": self.action_time_s,  # simulated seconds the actions took since reset
             "arm_contact_steps": self.arm_contact_steps,  # actions that ended with the arm touching the table or a bowl
         }
 
@@ -466,14 +475,17 @@ class ScoopEnv:
         return {"ee_pose": matrix_to_pose9(w.spoon_matrix()).astype(np.float32),
                 "joint_pos": w.joint_positions().astype(np.float32)}
 
-    def _info(self, ik_failure: bool, joint_step: float = 0.0, joint_speed_ratio: float = 0.0) -> dict[str, Any]:
+    def _info(self, ik_failure: bool, joint_step: float = 0.0, joint_speed_ratio: float = 0.0,
+              slowdown: float = 1.0) -> dict[str, Any]:
         # joint_step: the largest change of any arm joint's commanded angle over the action (rad);
         # joint_speed_ratio: the largest over that joint's Panda limit (robot.PANDA_MAX_JOINT_VELOCITY
-        # per action): above 1 no Panda could follow, and far above it is the IK leaving for another
-        # arm posture (an elbow or wrist flip).
+        # per action) as the action asked for it: above 1 no Panda could follow in one control
+        # period, and far above it is the IK leaving for another arm posture (an elbow or wrist
+        # flip); slowdown: how many control periods the action took (> 1 when slowed to
+        # SimConfig.joint_speed_cap).
         return {"step": self.step_count, "spilled": self.tracker.history[-1] if self.tracker.history else 0,
                 "ik_failure": ik_failure, "ik_failures": self.ik_failures, "joint_step": joint_step,
-                "joint_speed_ratio": joint_speed_ratio}
+                "joint_speed_ratio": joint_speed_ratio, "slowdown": slowdown}
 
     def _require_world(self) -> World:
         if self.world is None:

@@ -41,6 +41,17 @@ def joint_speed_ratio(joint_step: np.ndarray, control_hz: float) -> float:
     return float(np.max(np.abs(np.asarray(joint_step, dtype=np.float64)[:7]) / limit))
 
 
+def slowed_steps(joint_step: np.ndarray, steps: int, time_step: float, cap: float | None) -> int:
+    """Physics steps (>= `steps`) over which the arm may move its joint targets by `joint_step` (7,)
+    rad without any joint exceeding `cap` x its Panda limit (PANDA_MAX_JOINT_VELOCITY, rad/s);
+    `time_step` in seconds. None: `steps`, whatever the speed (SimConfig.joint_speed_cap)."""
+    if cap is None or steps <= 0:
+        return steps
+    limit = np.asarray(PANDA_MAX_JOINT_VELOCITY) * float(cap) * float(time_step)  # rad per physics step
+    needed = float(np.max(np.abs(np.asarray(joint_step, dtype=np.float64)[:7]) / limit))
+    return max(int(steps), int(math.ceil(needed - 1e-9)))
+
+
 def pose_to_matrix(position: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:
     m = np.eye(4)
     m[:3, :3] = quat_to_matrix(np.asarray(quat_xyzw, dtype=np.float64))

@@ -74,6 +74,13 @@ class SimConfig:
     # one and stops; measured on the expert's carry (commanded peak 0.2 m/s^2), the spoon's
     # acceleration was 1.1 m/s^2 median and up to 9 m/s^2, which shook loose food off the spoon.
     joint_command: Literal["interpolated", "stepwise"] = "interpolated"
+    # The fastest the arm's joints may be commanded, as a multiple of the Panda's joint velocity
+    # limits (robot.PANDA_MAX_JOINT_VELOCITY). A piece of an action whose joint targets would need
+    # more is slowed: it runs over as many more physics steps as its speed needs, so the action
+    # takes longer than one control period, as a robot's motion generator time-scales a path it
+    # cannot follow at the asked speed. None: every action runs in one control period whatever
+    # speed it needs (scoop-v7 and earlier).
+    joint_speed_cap: float | None = 1.0
     ik_position_tolerance: float = 0.01  # metres; larger IK residuals count as IK failures
     ik_orientation_tolerance: float = 0.15  # radians
     # Settling before an episode: run at least settle_min_s, stop when every particle is slower
@@ -100,6 +107,8 @@ class SimConfig:
                 f"in [1, {MAX_SOLVER_ITERATIONS}]")
         require(0 < self.control_hz <= 100, "control_hz", self.control_hz, "in (0, 100]")
         require(self.ik_per_action >= 1, "ik_per_action", self.ik_per_action, ">= 1")
+        require(self.joint_speed_cap is None or self.joint_speed_cap > 0, "joint_speed_cap", self.joint_speed_cap,
+                "a positive multiple of the Panda's joint velocity limits, or null")
         require(0 < self.settle_min_s <= self.settle_max_s, "settle_min_s", self.settle_min_s, "in (0, settle_max_s]")
         require(self.settle_speed > 0, "settle_speed", self.settle_speed, "positive")
         require(self.spoon_mass > 0, "spoon_mass", self.spoon_mass, "positive")

@@ -132,3 +132,68 @@ def test_after_an_unreachable_pose_the_next_path_starts_where_the_arm_is_command
         assert unanchored.n_unreachable == 1  # the path from the unreachable pose starts out of reach
     finally:
         env.close()
+
+
+def _fast_action(cap: float | None, rotation_deg: float = 40.0):
+    """One action that turns the spoon by `rotation_deg` about the world z axis in place: far more
+    than any Panda wrist turns in 0.1 s (2.61 rad/s x 0.1 s = 15 degrees). Returns (info, joint
+    speeds (steps, 7) rad/s measured at every physics step of the action, physics steps taken)."""
+    from grits_lab.sim.env import pose9_to_matrix
+    from grits_lab.sim.robot import ARM_JOINTS
+
+    env = ScoopEnv(SimConfig(joint_speed_cap=cap))
+    try:
+        env.reset(seed=0, options={"food": "soybeans", "n_particles": 0})
+        pose = pose9_to_matrix(matrix_to_pose9(env.spoon_pose()))
+        a = np.radians(rotation_deg)
+        turn = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+        target = pose.copy()
+        target[:3, :3] = turn @ pose[:3, :3]
+        world = env.world
+        speeds, original = [], world.step
+
+        def step(n: int = 1) -> None:
+            for _ in range(n):
+                original(1)
+                speeds.append([s[1] for s in world.client.getJointStates(world.robot, list(ARM_JOINTS))])
+
+        world.step = step
+        info = env.step(matrix_to_pose9(target))[4]
+        return info, np.abs(np.array(speeds)), len(speeds), env.metrics()
+    finally:
+        env.close()
+
+
+def test_an_action_too_fast_for_the_panda_is_slowed_to_its_joint_limits():
+    from grits_lab.sim.robot import PANDA_MAX_JOINT_VELOCITY
+
+    limit = np.array(PANDA_MAX_JOINT_VELOCITY)
+    info, speeds, steps, metrics = _fast_action(cap=1.0)
+    assert info["joint_speed_ratio"] > 1.5  # what the action asked for
+    # It ran over as many control periods as its joints need at their limits.
+    assert info["slowdown"] == pytest.approx(steps / SimConfig().substeps)
+    assert info["slowdown"] >= info["joint_speed_ratio"] * 0.95
+    assert metrics["slowed_actions"] == 1
+    assert metrics["action_time_s"] == pytest.approx(steps * SimConfig().time_step)
+    # The motors track the capped ramp: measured joint speeds stay near the limits.
+    assert (speeds / limit).max() < 1.3
+    # Without the cap the same action runs in one control period, at speeds no Panda reaches.
+    info_free, speeds_free, steps_free, metrics_free = _fast_action(cap=None)
+    assert steps_free == SimConfig().substeps and info_free["slowdown"] == 1.0 and metrics_free["slowed_actions"] == 0
+    assert (speeds_free / limit).max() > 1.5
+
+
+def test_slowed_steps_are_what_the_fastest_joint_needs():
+    from grits_lab.sim.robot import PANDA_MAX_JOINT_VELOCITY, slowed_steps
+
+    dt = 1 / 120
+    per_step = np.array(PANDA_MAX_JOINT_VELOCITY) * dt
+    assert slowed_steps(per_step * 6 * 0.5, 6, dt, 1.0) == 6  # half the limit: on time
+    assert slowed_steps(per_step * 6, 6, dt, 1.0) == 6  # exactly the limit
+    step = np.zeros(7)
+    step[5] = per_step[5] * 15  # joint 6 needs 15 steps at its limit
+    assert slowed_steps(step, 6, dt, 1.0) == 15
+    assert slowed_steps(step, 6, dt, 0.5) == 30
+    assert slowed_steps(step, 6, dt, None) == 6
+    with pytest.raises(Exception, match="joint_speed_cap"):
+        SimConfig(joint_speed_cap=0.0)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from grits_lab.errors import InputError
-from grits_lab.sim import ScoopEnv, expert_trajectory, nominal_expert_trajectory, play_episode, play_trajectory
+from grits_lab.sim import ScoopEnv, SimConfig, expert_trajectory, nominal_expert_trajectory, play_episode, play_trajectory
 from grits_lab.sim.env import matrix_to_pose9
 from grits_lab.sim.expert import spoon_orientation
 from grits_lab.sim.foods import level_count, load_foods
@@ -113,23 +113,26 @@ def test_tipping_the_loaded_spoon_over_the_table_spills(env, scooped):
     assert rec.spillage and rec.spilled >= record.scooped // 2
     assert rec.first_spill_step > len(traj)  # nothing spilled during the scoop itself
     assert rec.spilled_over_time == sorted(rec.spilled_over_time)
-    # Every grain left from the spoon (play_trajectory names no stage: all "scoop"); those that fell
-    # before the arm's one step beyond the Panda's limit (the wrist's flip as the roll nears 90 deg)
-    # fell off the moving spoon.
-    by_spoon = rec.spill_attribution["spilled_scoop_off_spoon"] + rec.spill_attribution["spilled_scoop_posture_flip"]
-    assert by_spoon == rec.spilled == sum(rec.spill_attribution.values())
-    first_over = int(np.argmax(ratios > 1.0))
-    offset = len(rec.spilled_over_time) - len(path)  # the steps this env took before the tip
-    assert rec.spilled_over_time[offset + first_over - 1] == rec.spill_attribution["spilled_scoop_off_spoon"] > 0
+    # Every grain left from the spoon (play_trajectory names no stage: all "scoop"). The wrist's
+    # flip as the roll nears 90 deg asks for more than the Panda's limit; the arm slows it to the
+    # limit (sim.joint_speed_cap), so nothing is thrown: every grain fell off the moving spoon.
+    assert rec.spill_attribution["spilled_scoop_off_spoon"] == rec.spilled == sum(rec.spill_attribution.values())
+    assert ratios.max() > 1.0 and env.metrics()["slowed_actions"] > 0
 
 
-def test_food_thrown_by_a_tip_faster_than_a_panda_can_move_is_attributed_to_the_arm(env):
-    play_episode(env, "soybeans", "low", seed=0)
-    path = _tip_over_table(env, 3)
-    assert env.check_path(path).speed_ratios.max() > 1.0
-    rec = play_trajectory(env, path)
-    assert rec.spilled > 0
-    assert rec.spill_attribution["spilled_scoop_posture_flip"] >= rec.spilled - 1
+def test_food_thrown_by_a_tip_faster_than_a_panda_can_move_is_attributed_to_the_arm():
+    # Only an arm allowed past the Panda's limits (joint_speed_cap null, scoop-v7 and earlier) throws.
+    env = ScoopEnv(SimConfig(joint_speed_cap=None))
+    try:
+        play_episode(env, "soybeans", "low", seed=0)
+        path = _tip_over_table(env, 3)
+        assert env.check_path(path).speed_ratios.max() > 1.0
+        rec = play_trajectory(env, path)
+        assert rec.spilled > 0
+        assert rec.spill_attribution["spilled_scoop_posture_flip"] >= rec.spilled - 1
+        assert env.metrics()["slowed_actions"] == 0
+    finally:
+        env.close()
 
 
 @pytest.mark.parametrize("food", ["mung_beans", "brown_rice", "sago"])
