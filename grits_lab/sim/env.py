@@ -3,7 +3,8 @@
 The action is a 9-D spoon pose target (xyz in metres + 6-D rotation, world frame, the spoon tool
 frame of `shapes.py`) at `SimConfig.control_hz` (10 Hz). Underneath, the pose path from the
 previous target to the new one is cut into `ik_per_action` pieces, each solved by IK and tracked
-by joint position control for its share of the physics steps. Every reset builds a fresh world
+by joint position control for its share of the physics steps (more when its joints would move
+faster than the Panda's limits: `SimConfig.joint_speed_cap`). Every reset builds a fresh world
 (new PyBullet client state), samples the food's particles from the env's seeded generator and
 lets them settle, so the same seed and actions always give the same episode.
 """
@@ -226,7 +227,9 @@ class ScoopEnv:
             "the food does not fit the bowl: use fewer or smaller particles")
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        """Move the spoon towards the 9-D pose `action` for one control period (1 / control_hz s)."""
+        """Move the spoon towards the 9-D pose `action` for one control period (1 / control_hz s), or
+        for longer when its joints would exceed `SimConfig.joint_speed_cap` x the Panda's limits
+        (info["slowdown"]: control periods taken). InputError for a non-finite or mis-shaped action."""
         world = self._require_world()
         a = np.asarray(action, dtype=np.float64)
         if a.shape != (9,) or not np.all(np.isfinite(a)):
