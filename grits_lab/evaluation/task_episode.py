@@ -252,7 +252,6 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
 
     held = bool(plan.n_checks) and not plan.reachable and settings.no_option == "hold"
     env.set_solver_iterations(settings.solver_iterations)
-    env.set_ik_per_action(settings.ik_per_action)
     if held:  # no motion the arm can follow: it keeps the spoon where the scoop left it
         for _ in range(settings.settle_steps):
             step(current, "lift")

@@ -150,7 +150,6 @@ class ScoopEnv:
         self._hand_in_spoon = spoon_in_hand(self.spoon_geometry)
         self._home_joints: np.ndarray | None = None
         self._seed_stream: np.random.Generator | None = None
-        self.ik_per_action = self.config.ik_per_action  # set_ik_per_action; every reset restores the config's
 
     # ---- Gymnasium contract ------------------------------------------------------------------
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
@@ -203,7 +202,6 @@ class ScoopEnv:
         self.step_count = 0
         self.ik_failures = 0
         self.max_joint_speed_ratio = 0.0
-        self.ik_per_action = self.config.ik_per_action
         self.slowed_actions = 0
         self.action_time_s = 0.0
         self.arm_contact_steps = 0
@@ -239,12 +237,12 @@ class ScoopEnv:
         cfg = self.config
         if cfg.freeze_distance is not None and len(world.particles):
             world.freeze(self._far_at_rest(world, start[:3, 3], target[:3, 3], cfg.freeze_distance))
-        pieces = self.ik_per_action
+        pieces = cfg.ik_per_action
         steps = cfg.substeps
         joints_before = self._joint_target.copy()
         failed = False
         done = executed = 0
-        for k, joints, reached in self._track(start, target, self._joint_target, pieces=pieces):
+        for k, joints, reached in self._track(start, target, self._joint_target):
             failed |= not reached
             n = (steps * (k + 1)) // pieces - done
             done += n
@@ -301,17 +299,6 @@ class ScoopEnv:
         self._require_world()
         self._pose_target = self.kinematics.forward(self._joint_target) @ np.linalg.inv(self._hand_in_spoon)
 
-    def set_ik_per_action(self, pieces: int | None) -> None:
-        """IK pieces per action from now on (each tracked at its own constant joint velocity); None:
-        `SimConfig.ik_per_action`. Every reset starts again at the config's; `check_path` keeps the
-        config's. The stages after the scoop may raise it (`TransferSettings.ik_per_action`).
-        InputError outside [1, physics steps per action]; RuntimeError before `reset`."""
-        self._require_world()
-        n = self.config.ik_per_action if pieces is None else int(pieces)
-        if not 1 <= n <= self.config.substeps:
-            raise InputError(f"IK pieces per action must be in [1, {self.config.substeps}], got {n}")
-        self.ik_per_action = n
-
     def set_solver_iterations(self, iterations: int | None) -> None:
         """Constraint-solver iterations per physics step from now on (PyBullet's
         numSolverIterations); None: `SimConfig.solver_iterations`. Every reset starts again at
@@ -324,7 +311,7 @@ class ScoopEnv:
         world.client.setPhysicsEngineParameter(numSolverIterations=n)
 
     def _track(self, start: np.ndarray, target: np.ndarray, joints: np.ndarray,
-               rest_pull: bool | None = None, pieces: int | None = None) -> Iterator[tuple[int, np.ndarray, bool]]:
+               rest_pull: bool | None = None) -> Iterator[tuple[int, np.ndarray, bool]]:
         """The joint targets of one action: for each of the `ik_per_action` pieces of the pose path
         from (4, 4) `start` to `target`, (piece index, joint target (7,), whether IK reached the piece).
         An unreachable piece keeps the last reachable joint target. rest_pull: the IK's null-space
@@ -333,9 +320,8 @@ class ScoopEnv:
         cfg = self.config
         if rest_pull is None:
             rest_pull = self.rest_pull
-        pieces = cfg.ik_per_action if pieces is None else pieces
-        for k in range(pieces):
-            pose = interpolate_pose(start, target, (k + 1) / pieces)
+        for k in range(cfg.ik_per_action):
+            pose = interpolate_pose(start, target, (k + 1) / cfg.ik_per_action)
             ik = self.kinematics.solve(pose @ self._hand_in_spoon, joints, cfg.ik_position_tolerance, cfg.ik_orientation_tolerance,
                                        rest_pull=rest_pull)
             if ik.ok:

@@ -102,12 +102,6 @@ class TransferSettings:
     # (docs/evaluation.md, "Grains a still spoon loses"). The scoop keeps 30: its datasets and
     # checkpoints were made with it.
     solver_iterations: int | None = 100
-    # IK pieces per action from the lift on (None: `sim.ik_per_action`, 4; at most `sim`'s physics
-    # steps per action, 12). Each piece is tracked at its own constant joint velocity, so the
-    # commanded velocity steps at every piece's end; with 12, it changes at every physics step.
-    # The reach check keeps `sim.ik_per_action`. An experiment's setting, off by default
-    # (docs/evaluation.md, "Velocity steps in the carry").
-    ik_per_action: int | None = None
 
     def __post_init__(self) -> None:
         require(self.clearance > 0, "transfer.clearance", self.clearance, "positive")
@@ -127,7 +121,5 @@ class TransferSettings:
         require(self.pour_steps >= 1, "transfer.pour_steps", self.pour_steps, "at least 1")
         require(self.level_steps >= 1, "transfer.level_steps", self.level_steps, "at least 1")
         require(self.lift_hold_steps >= 0, "transfer.lift_hold_steps", self.lift_hold_steps, "non-negative")
-        require(self.ik_per_action is None or self.ik_per_action >= 1, "transfer.ik_per_action", self.ik_per_action,
-                ">= 1, or null for the scoop's")
         require(self.solver_iterations is None or 1 <= self.solver_iterations <= MAX_SOLVER_ITERATIONS,
                 "transfer.solver_iterations", self.solver_iterations, f"in [1, {MAX_SOLVER_ITERATIONS}], or null for the scoop's")

@@ -377,36 +377,3 @@ def test_the_pours_heading_alternatives_vary_fastest():
     assert transfer_options(settings)[1].describe().endswith("turned -90 deg")
     with pytest.raises(ConfigError, match="transfer.pour_axis"):
         TransferSettings(pour_axis="pitch")
-
-
-def test_the_transfers_ik_pieces_are_its_own_and_a_reset_restores_the_configs():
-    from grits_lab.errors import InputError
-    from grits_lab.sim.env import matrix_to_pose9
-
-    env = ScoopEnv()
-    try:
-        env.reset(seed=0, options={"food": "soybeans", "n_particles": 0})
-        assert env.ik_per_action == env.config.ik_per_action == 4
-        steps = env.config.substeps  # physics steps per action, 12
-        env.set_ik_per_action(steps)
-        seen = []
-        original = env._track
-
-        def track(*args, **kwargs):
-            for item in original(*args, **kwargs):
-                seen.append(item[0])
-                yield item
-
-        env._track = track
-        env.step(matrix_to_pose9(env.spoon_pose()))
-        assert seen == list(range(steps))  # one IK piece per physics step
-        with pytest.raises(InputError, match="IK pieces"):
-            env.set_ik_per_action(steps + 1)
-        env.reset(seed=0, options={"food": "soybeans", "n_particles": 0})
-        assert env.ik_per_action == 4
-    finally:
-        env.close()
-    from grits_lab.evaluation.evaluation_config import TransferSettings
-
-    with pytest.raises(Exception, match="transfer.ik_per_action"):
-        TransferSettings(ik_per_action=0)
