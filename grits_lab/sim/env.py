@@ -262,7 +262,7 @@ class ScoopEnv:
         self.max_joint_speed_ratio = max(self.max_joint_speed_ratio, speed_ratio)
         self.arm_contact_steps += int(world.arm_touches_static())
         before = self.tracker.history[-1] if self.tracker.history else 0
-        spilled = self.tracker.update(self._classify(), thrown=executed_ratio > 1.0)
+        spilled = self.tracker.update(self._classify(), thrown=executed_ratio > 1.0 + 1e-6)
         truncated = self.step_count >= cfg.max_episode_steps
         return self._obs(), -float(spilled - before), False, truncated, self._info(
             ik_failure=failed, joint_step=joint_step, joint_speed_ratio=speed_ratio, slowdown=executed / steps)

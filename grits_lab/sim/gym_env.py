@@ -112,7 +112,8 @@ class ScoopGymEnv(ScoopEnv, gym.Env):
         return obs, {**info, "metrics": self.metrics()}
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        """One action (a relative move or an absolute pose, by `action_mode`) for 1 / control_hz s."""
+        """One action (a relative move or an absolute pose, by `action_mode`) for 1 / control_hz s, or
+        longer when slowed to the Panda's joint limits (info["slowdown"], ScoopEnv.step)."""
         pose = self.relative_target(action) if self.action_mode == "relative" else action
         obs, reward, terminated, truncated, info = ScoopEnv.step(self, pose)
         return obs, reward, terminated, truncated, {**info, "metrics": self.metrics()}

@@ -45,10 +45,9 @@ def slowed_steps(joint_step: np.ndarray, steps: int, time_step: float, cap: floa
     """Physics steps (>= `steps`) over which the arm may move its joint targets by `joint_step` (7,)
     rad without any joint exceeding `cap` x its Panda limit (PANDA_MAX_JOINT_VELOCITY, rad/s);
     `time_step` in seconds. None: `steps`, whatever the speed (SimConfig.joint_speed_cap)."""
-    if cap is None or steps <= 0:
+    if cap is None:
         return steps
-    limit = np.asarray(PANDA_MAX_JOINT_VELOCITY) * float(cap) * float(time_step)  # rad per physics step
-    needed = float(np.max(np.abs(np.asarray(joint_step, dtype=np.float64)[:7]) / limit))
+    needed = joint_speed_ratio(joint_step, 1.0 / (float(cap) * float(time_step)))  # physics steps at the capped limits
     return max(int(steps), int(math.ceil(needed - 1e-9)))
 
 

@@ -79,7 +79,8 @@ class SimConfig:
     # more is slowed: it runs over as many more physics steps as its speed needs, so the action
     # takes longer than one control period, as a robot's motion generator time-scales a path it
     # cannot follow at the asked speed. None: every action runs in one control period whatever
-    # speed it needs (scoop-v7 and earlier).
+    # speed it needs (scoop-v7 and earlier). With joint_command "stepwise" the cap only lengthens
+    # how long each target is held; the motors then reach it as fast as their forces allow.
     joint_speed_cap: float | None = 1.0
     ik_position_tolerance: float = 0.01  # metres; larger IK residuals count as IK failures
     ik_orientation_tolerance: float = 0.15  # radians
@@ -117,6 +118,8 @@ class SimConfig:
         require(len({c.name for c in self.cameras}) == len(self.cameras), "cameras", [c.name for c in self.cameras], "uniquely named")
         steps = 1.0 / (self.control_hz * self.time_step)
         require(abs(steps - round(steps)) < 1e-6, "control_hz", self.control_hz, "a rate whose period is a whole number of time steps")
+        require(self.ik_per_action <= round(steps), "ik_per_action", self.ik_per_action,
+                f"at most the physics steps per action ({round(steps)}), so that every piece is tracked for at least one")
 
     @property
     def substeps(self) -> int:

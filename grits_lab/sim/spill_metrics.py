@@ -119,8 +119,8 @@ def spoon_coverage(positions: np.ndarray, radii: np.ndarray, spoon_pose: np.ndar
 
 SPILL_STAGES = ("scoop", "lift", "carry", "pour", "after_pour")
 SPILL_CAUSES = ("over_rim", "off_spoon", "poured_outside", "bounced_out", "posture_flip")
-# A particle that left the spoon within this many actions after one whose joint step exceeded the
-# Panda's limit was thrown by it: a grain flung 20-30 cm falls for 0.2-0.25 s before it lands.
+# A particle that left the spoon within this many actions after one the arm executed faster than
+# the Panda's limit was thrown by it: a grain flung 20-30 cm falls for 0.2-0.25 s before it lands.
 THROW_WINDOW = 3
 
 
@@ -140,11 +140,13 @@ class SpillTracker:
 
     Stage: the task stage the env was in (`stage`, set by the task runner: scoop, lift, carry,
     pour, after_pour) when the particle was first counted spilled. Cause, from where the particle
-    was at the previous check (one per action, 10 Hz) and how the arm moved:
+    was at the previous check (one per action) and how the arm moved:
     - over_rim: it lay in the source bowl (below the rim) and not in the spoon: it left over the rim.
     - bounced_out: it lay in the target bowl: it left it again (bounced or rolled out).
-    - posture_flip: it came off the spoon within `THROW_WINDOW` actions after an action whose joint
-      step exceeded the Panda's velocity limit (`thrown`): the arm swung into another posture.
+    - posture_flip: it came off the spoon within `THROW_WINDOW` actions after an action the arm
+      executed faster than the Panda's velocity limit (`thrown`): the arm swung into another
+      posture. With `SimConfig.joint_speed_cap` at 1 or below no action is executed that fast
+      (a faster one is slowed), so the cause stays empty and such losses count as off_spoon.
     - poured_outside: it came off the spoon in the pour or after it and landed outside the target.
     - off_spoon: it came off the spoon (or off the heap the spoon carries) while the spoon moved.
     A particle that comes to rest in the target bowl is no longer counted (its flag is cleared), so
@@ -175,8 +177,8 @@ class SpillTracker:
         self._was_in_target = counts.in_target & ~counts.in_spoon
 
     def update(self, counts: ParticleCounts, thrown: bool = False) -> int:
-        """Account for the state after one action; `thrown`: that action stepped a joint beyond the
-        Panda's limit. Returns the spilled count."""
+        """Account for the state after one action; `thrown`: the arm executed that action faster than
+        the Panda's limit allows (ScoopEnv.step). Returns the spilled count."""
         self._since_throw = 0 if thrown else self._since_throw + 1
         now = counts.outside_source & ~counts.in_spoon & ~counts.in_target
         new = now & ~self.spilled_flags

@@ -137,7 +137,8 @@ def test_after_an_unreachable_pose_the_next_path_starts_where_the_arm_is_command
 def _fast_action(cap: float | None, rotation_deg: float = 40.0):
     """One action that turns the spoon by `rotation_deg` about the world z axis in place: far more
     than any Panda wrist turns in 0.1 s (2.61 rad/s x 0.1 s = 15 degrees). Returns (info, joint
-    speeds (steps, 7) rad/s measured at every physics step of the action, physics steps taken)."""
+    speeds (steps, 7) rad/s measured at every physics step of the action, physics steps taken,
+    the env's metrics)."""
     from grits_lab.sim.env import pose9_to_matrix
     from grits_lab.sim.robot import ARM_JOINTS
 
@@ -190,10 +191,15 @@ def test_slowed_steps_are_what_the_fastest_joint_needs():
     per_step = np.array(PANDA_MAX_JOINT_VELOCITY) * dt
     assert slowed_steps(per_step * 6 * 0.5, 6, dt, 1.0) == 6  # half the limit: on time
     assert slowed_steps(per_step * 6, 6, dt, 1.0) == 6  # exactly the limit
+    assert slowed_steps(per_step * 6 * 1.001, 6, dt, 1.0) == 7  # just over it: one step more
     step = np.zeros(7)
     step[5] = per_step[5] * 15  # joint 6 needs 15 steps at its limit
     assert slowed_steps(step, 6, dt, 1.0) == 15
     assert slowed_steps(step, 6, dt, 0.5) == 30
     assert slowed_steps(step, 6, dt, None) == 6
-    with pytest.raises(Exception, match="joint_speed_cap"):
+    from grits_lab.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="joint_speed_cap"):
         SimConfig(joint_speed_cap=0.0)
+    with pytest.raises(ConfigError, match="ik_per_action"):
+        SimConfig(ik_per_action=13)  # more pieces than the 12 physics steps of an action
