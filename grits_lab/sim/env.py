@@ -303,7 +303,7 @@ class ScoopEnv:
         """Constraint-solver iterations per physics step from now on (PyBullet's
         numSolverIterations); None: `SimConfig.solver_iterations`. Every reset starts again at
         the config's. The stages after the scoop raise it (`TransferSettings.solver_iterations`).
-        InputError outside [1, 200]; RuntimeError before `reset`."""
+        InputError outside [1, MAX_SOLVER_ITERATIONS]; RuntimeError before `reset`."""
         world = self._require_world()
         n = self.config.solver_iterations if iterations is None else int(iterations)
         if not 1 <= n <= MAX_SOLVER_ITERATIONS:

@@ -118,8 +118,8 @@ class SimConfig:
         require(len({c.name for c in self.cameras}) == len(self.cameras), "cameras", [c.name for c in self.cameras], "uniquely named")
         steps = 1.0 / (self.control_hz * self.time_step)
         require(abs(steps - round(steps)) < 1e-6, "control_hz", self.control_hz, "a rate whose period is a whole number of time steps")
-        require(self.ik_per_action <= round(steps), "ik_per_action", self.ik_per_action,
-                f"at most the physics steps per action ({round(steps)}), so that every piece is tracked for at least one")
+        require(self.ik_per_action <= self.substeps, "ik_per_action", self.ik_per_action,
+                f"at most the physics steps per action ({self.substeps}), so that every piece is tracked for at least one")
 
     @property
     def substeps(self) -> int:

@@ -246,16 +246,22 @@ def build_static_scene(client: BulletClient, source_position: np.ndarray, target
     return table, source_bowl, target_bowl
 
 
-def build_world(config: SimConfig, components: list[SampledParticles], rng: np.random.Generator,
-                target_xy: tuple[float, float], joints: np.ndarray | None = None) -> World:
-    """Create the client and every body; the arm starts at `joints` (7,), particles still unsettled."""
-    client = connect_direct()
-    client.setAdditionalSearchPath(pybullet_data.getDataPath())
+def apply_physics(client: BulletClient, config: SimConfig) -> None:
+    """The world's physics settings in `client`: time step, solver iterations, contact breaking
+    threshold, deterministic pairs, gravity (SimConfig)."""
     client.setPhysicsEngineParameter(
         fixedTimeStep=config.time_step, numSolverIterations=config.solver_iterations, numSubSteps=0,
         deterministicOverlappingPairs=1, contactBreakingThreshold=config.contact_breaking_threshold,
     )
     client.setGravity(0, 0, -9.81)
+
+
+def build_world(config: SimConfig, components: list[SampledParticles], rng: np.random.Generator,
+                target_xy: tuple[float, float], joints: np.ndarray | None = None) -> World:
+    """Create the client and every body; the arm starts at `joints` (7,), particles still unsettled."""
+    client = connect_direct()
+    client.setAdditionalSearchPath(pybullet_data.getDataPath())
+    apply_physics(client, config)
 
     source_geometry, target_geometry, spoon_geometry = BowlGeometry(), TARGET_BOWL, SpoonGeometry()
     src_pos = np.array([config.source_bowl_xy[0], config.source_bowl_xy[1], 0.0])

@@ -87,14 +87,12 @@ def _discs_below_table(support_depth: float) -> int:
     bowl on the table, at the world's physics settings; how many end with their centre below the
     table's top after 3 s."""
     from grits_lab.sim.sim_config import SimConfig
-    from grits_lab.sim.world import TABLE_CENTER, TABLE_HALF, TABLE_TOP
+    from grits_lab.sim.world import TABLE_CENTER, TABLE_HALF, TABLE_TOP, apply_physics
 
     cfg = SimConfig()
     c = connect_direct()
     try:
-        c.setPhysicsEngineParameter(fixedTimeStep=cfg.time_step, numSolverIterations=cfg.solver_iterations, numSubSteps=0,
-                                    deterministicOverlappingPairs=1, contactBreakingThreshold=cfg.contact_breaking_threshold)
-        c.setGravity(0, 0, -9.81)
+        apply_physics(c, cfg)
         centre = np.array([TABLE_CENTER[0], TABLE_CENTER[1], TABLE_TOP])
         create_static_boxes(c, bowl_boxes(TARGET_BOWL, support_depth), centre, (1, 1, 1, 1))
         c.createMultiBody(0, c.createCollisionShape(pb.GEOM_BOX, halfExtents=TABLE_HALF), -1, basePosition=TABLE_CENTER)
