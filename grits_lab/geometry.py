@@ -96,3 +96,29 @@ def axis_angle_matrix(axis: np.ndarray, angles: np.ndarray | float) -> np.ndarra
     a = np.asarray(angles, dtype=np.float64)[..., None, None]
     K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
     return np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * (K @ K)
+
+
+def cubic_pose_path(start: np.ndarray, waypoints: np.ndarray, pieces: int) -> np.ndarray:
+    """(T, pieces, 9) poses a C1 cubic spline passes through between 9-D waypoints, `pieces` per span.
+
+    start: (9,) the pose before the first waypoint; waypoints: (T, 9), one per control period.
+    Span t runs from waypoint t-1 (start for t = 0) to waypoint t; its entries are the spline at
+    (j + 1) / pieces of the span, so entry [t, -1] is waypoint t. The spline is a cubic Hermite
+    curve per span in position and in the 6-D rotation (re-orthonormalised by `rot6d_to_matrix`),
+    with Catmull-Rom tangents (the central difference of the neighbouring waypoints) and zero
+    velocity at the first and last waypoint: velocity is continuous across the waypoints, where
+    straight spans between them step it at every one. This is the cubic interpolation a robot's
+    trajectory controller applies between via points that carry velocities (ROS
+    joint_trajectory_controller; Catmull & Rom 1974). ValueError for other shapes or pieces < 1.
+    """
+    first, rest = np.asarray(start, dtype=np.float64), np.asarray(waypoints, dtype=np.float64)
+    if first.shape != (9,) or rest.ndim != 2 or rest.shape[1] != 9 or pieces < 1:
+        raise ValueError(f"need start (9,), waypoints (T, 9) and pieces >= 1; got {first.shape}, {rest.shape} and {pieces}")
+    p = np.concatenate([first[None], rest])
+    tangents = np.zeros_like(p)
+    tangents[1:-1] = (p[2:] - p[:-2]) / 2.0
+    s = (np.arange(1, pieces + 1) / pieces)[None, :, None]
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    out = h00 * p[:-1, None] + h10 * tangents[:-1, None] + h01 * p[1:, None] + h11 * tangents[1:, None]
+    out[..., 3:9] = matrix_to_rot6d(rot6d_to_matrix(out[..., 3:9]))
+    return out

@@ -11,6 +11,8 @@ import pytest
 from grits_lab.data.format import read_episode, rebuild_index, write_episode
 from grits_lab.errors import StorageError
 from grits_lab.geometry import (
+    axis_angle_matrix,
+    cubic_pose_path,
     matrix_to_rot6d,
     pose7_to_pose9,
     pose9_to_pose7,
@@ -43,6 +45,46 @@ def test_rot6d_projects_noisy_vectors_to_rotations():
     # the first column keeps the direction of the first three numbers
     cos = np.sum(m[:, :, 0] * noisy[:, :3], axis=1) / np.linalg.norm(noisy[:, :3], axis=1)
     np.testing.assert_allclose(cos, 1.0, atol=1e-9)
+
+
+def _spline_waypoints() -> tuple[np.ndarray, np.ndarray]:
+    """A start and 8 waypoints that move, turn about z and stop: (9,), (8, 9)."""
+    turns = axis_angle_matrix([0.0, 0.0, 1.0], np.radians([0, 5, 15, 30, 45, 55, 60, 60, 60]))
+    xyz = np.array([[0, 0, 0], [0.01, 0, 0], [0.03, 0.01, 0], [0.06, 0.03, 0.01], [0.08, 0.06, 0.02],
+                    [0.09, 0.08, 0.02], [0.09, 0.09, 0.02], [0.09, 0.09, 0.02], [0.09, 0.09, 0.02]], dtype=float)
+    poses = np.concatenate([xyz, matrix_to_rot6d(turns)], axis=1)
+    return poses[0], poses[1:]
+
+
+def test_the_cubic_pose_path_passes_every_waypoint_with_continuous_velocity():
+    start, waypoints = _spline_waypoints()
+    path = cubic_pose_path(start, waypoints, 12)
+    assert path.shape == (8, 12, 9)
+    np.testing.assert_allclose(path[:, -1], waypoints, atol=1e-12)  # each span ends on its waypoint
+    m = rot6d_to_matrix(path[..., 3:])
+    np.testing.assert_allclose(m @ np.swapaxes(m, -1, -2), np.broadcast_to(np.eye(3), m.shape), atol=1e-9)
+    dense = np.concatenate([start[None], path.reshape(-1, 9)])
+    velocity = np.diff(dense, axis=0) * 12  # per span, so a straight span's velocity is its length
+    # At every waypoint the velocity just before equals the velocity just after, to the
+    # spline's curvature over one piece; straight spans jump there by the change of span.
+    after_knot, before_knot = velocity[12::12], velocity[11:-1:12]
+    jumps = np.abs(after_knot - before_knot)[:, :3].max()
+    straight = np.abs(np.diff(np.diff(np.concatenate([start[None], waypoints]), axis=0), axis=0))[:, :3].max()
+    assert jumps < 0.2 * straight
+    # From rest and to rest: the first and last pieces move far less than an average piece.
+    assert np.linalg.norm(velocity[0, :3]) < 0.1 * np.linalg.norm(waypoints[1, :3] - waypoints[0, :3])
+    np.testing.assert_allclose(path[-1], np.broadcast_to(waypoints[-1], (12, 9)), atol=1e-12)  # held still: no drift
+
+
+def test_the_cubic_pose_path_of_a_steady_line_is_the_line():
+    start = np.array([0, 0, 0, 1, 0, 0, 0, 1, 0], dtype=float)
+    waypoints = np.stack([start + [0.01 * k, 0, 0, 0, 0, 0, 0, 0, 0] for k in range(1, 7)])
+    path = cubic_pose_path(start, waypoints, 4)
+    np.testing.assert_allclose(np.diff(path[1:-1].reshape(-1, 9)[:, 0]), 0.0025, atol=1e-12)  # inside: constant speed
+    with pytest.raises(ValueError, match="pieces >= 1"):
+        cubic_pose_path(start, waypoints, 0)
+    with pytest.raises(ValueError, match="waypoints"):
+        cubic_pose_path(start, waypoints[:, :7], 4)
 
 
 def test_derived_seeds_are_stable_and_distinct():

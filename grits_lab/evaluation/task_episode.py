@@ -25,6 +25,7 @@ import numpy as np
 from grits_lab.evaluation.controllers import ObsHistory, is_still
 from grits_lab.evaluation.episode_scene import EpisodeScene
 from grits_lab.evaluation.transfer import Obstacle, choose_transfer, locate_bowl
+from grits_lab.geometry import cubic_pose_path
 from grits_lab.sim.env import matrix_to_pose9
 
 if TYPE_CHECKING:  # annotations only: no import cost, no cycle
@@ -215,7 +216,8 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     passed and `settings.no_option` is "hold": the arm keeps the spoon where the scoop left it),
     "reachable" (whether the reach check passed; None unchecked), "checks" (options checked before moving), "spilled_by_stage"
     (spilled count at the end of each stage), "carry_peak_speed_mps" / "carry_peak_accel_mps2"
-    (of the spoon's commanded path in the lift and carry, from its per-action differences).
+    (of the spoon's commanded path in the lift and carry, from its per-action differences; the
+    spoon's measured peak is `ScoopEnv.metrics()["carry_peak_spoon_accel_mps2"]`).
     """
     target = locate_bowl(scene.object_points("target_bowl"))
     truth = np.asarray(env.target_bowl_pose(), dtype=np.float64)[:3, 3]
@@ -239,12 +241,12 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     ik_failures, joint_steps, speed_ratios = 0, [0.0], [0.0]
     spilled_by_stage: dict[str, int] = {}
 
-    def step(action: np.ndarray, stage: str) -> None:
+    def step(action: np.ndarray, stage: str, via: np.ndarray | None = None) -> None:
         nonlocal ik_failures
         if env.tracker.stage != stage:
             spilled_by_stage[env.tracker.stage] = int(env.metrics()["spilled"])
             env.set_stage(stage, rest_pull=settings.rest_pull)
-        info = env.step(action)[4]
+        info = (env.step(action) if via is None else env.step_along(via))[4]
         ik_failures += int(info["ik_failure"])
         joint_steps.append(float(info["joint_step"]))
         speed_ratios.append(float(info["joint_speed_ratio"]))
@@ -256,10 +258,12 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
         for _ in range(settings.settle_steps):
             step(current, "lift")
     else:
-        for action, stage in zip(plan.actions, plan.stages):
-            step(action, stage)
-        for _ in range(settings.settle_steps):
-            step(plan.actions[-1], "after_pour")
+        actions = np.concatenate([plan.actions, np.repeat(plan.actions[-1:], settings.settle_steps, axis=0)])
+        stages = list(plan.stages) + ["after_pour"] * settings.settle_steps
+        via = (cubic_pose_path(matrix_to_pose9(env.pose_target), actions, env.config.substeps)
+               if settings.interpolation == "cubic" else [None] * len(actions))
+        for action, stage, poses in zip(actions, stages, via):
+            step(action, stage, poses)
     metrics = env.metrics()
     spilled_by_stage[env.tracker.stage] = int(metrics["spilled"])
     moving = np.array([current] if held else [a for a, stage in zip(plan.actions, plan.stages) if stage != "pour"], dtype=np.float64)
@@ -335,7 +339,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
     record.update({"target_locate_error_m": math.nan, "target_fit_residual_m": math.nan, "spilled_transfer": 0,
                    "transfer_ik_failures": 0, "transfer_max_joint_step_rad": math.nan, "transfer_max_joint_speed_ratio": math.nan,
                    "transfer_plan": "", "transfer_reachable": None, "transfer_checks": 0, "pour_steps": 0,
-                   "carry_peak_speed_mps": math.nan, "carry_peak_accel_mps2": math.nan, "transfer_arm_contact_steps": 0,
+                   "carry_peak_speed_mps": math.nan, "carry_peak_accel_mps2": math.nan, "carry_peak_spoon_accel_mps2": math.nan, "transfer_arm_contact_steps": 0,
                    "transfer_slowed_actions": 0})
     if config.transfer.enabled and m["scooped"] > 0:
         t0 = time.perf_counter()
@@ -350,6 +354,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
                        "transfer_max_joint_speed_ratio": tr["max_joint_speed_ratio"], "pour_steps": tr["pour_steps"],
                        "transfer_plan": tr["plan"], "transfer_reachable": tr["reachable"], "transfer_checks": tr["checks"],
                        "carry_peak_speed_mps": tr["carry_peak_speed_mps"], "carry_peak_accel_mps2": tr["carry_peak_accel_mps2"],
+                       "carry_peak_spoon_accel_mps2": float(final["carry_peak_spoon_accel_mps2"]),
                        "transfer_arm_contact_steps": int(final["arm_contact_steps"]) - int(m["arm_contact_steps"]),
                        "transfer_slowed_actions": int(final["slowed_actions"]) - int(m["slowed_actions"])})
     needed = 1 if env.food.success_rule == "items" else max(1, math.ceil(0.5 * int(m["scooped"])))

@@ -212,6 +212,11 @@ class _FilmedEnv:
         self._film(out[4])
         return out
 
+    def step_along(self, poses: Any) -> Any:
+        out = self._env.step_along(poses)
+        self._film(out[4])
+        return out
+
 
 class _CountedEnv:
     """An env that calls `tick()` after every action (a progress bar's update)."""
@@ -224,6 +229,11 @@ class _CountedEnv:
 
     def step(self, action: Any) -> Any:
         out = self._env.step(action)
+        self._tick()
+        return out
+
+    def step_along(self, poses: Any) -> Any:
+        out = self._env.step_along(poses)
         self._tick()
         return out
 

@@ -205,6 +205,8 @@ class ScoopEnv:
         self.slowed_actions = 0
         self.action_time_s = 0.0
         self.arm_contact_steps = 0
+        self.carry_peak_spoon_accel = 0.0
+        self._spoon_velocity: np.ndarray | None = None
         self.rest_pull = True
         counts = self._classify()
         self._refuse_unsettled(counts.outside_source)
@@ -227,22 +229,41 @@ class ScoopEnv:
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         """Move the spoon towards the 9-D pose `action` for one control period (1 / control_hz s), or
         for longer when its joints would exceed `SimConfig.joint_speed_cap` x the Panda's limits
-        (info["slowdown"]: control periods taken). InputError for a non-finite or mis-shaped action."""
+        (info["slowdown"]: control periods taken), along the straight pose path from the last
+        action (`SimConfig.ik_per_action` IK pieces). InputError for a non-finite or mis-shaped action."""
         world = self._require_world()
         a = np.asarray(action, dtype=np.float64)
         if a.shape != (9,) or not np.all(np.isfinite(a)):
             raise InputError(f"action must be a finite 9-vector (xyz + 6-D rotation), got shape {a.shape}")
         target = pose9_to_matrix(a)
+        return self._move(world, target, [interpolate_pose(self._pose_target, target, (k + 1) / self.config.ik_per_action)
+                                          for k in range(self.config.ik_per_action)])
+
+    def step_along(self, poses: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        """`step` to the last of the 9-D poses `poses` (n, 9) through the others: one IK piece per
+        pose, the control period's physics steps shared among them (n <= `SimConfig.substeps`).
+        A motion generator's finer path between two actions (`geometry.cubic_pose_path`); the
+        records and info are `step`'s. InputError for other shapes or non-finite poses."""
+        world = self._require_world()
+        p = np.asarray(poses, dtype=np.float64)
+        if p.ndim != 2 or p.shape[1] != 9 or not 1 <= len(p) <= self.config.substeps or not np.all(np.isfinite(p)):
+            raise InputError(f"poses must be finite, (n, 9) with 1 <= n <= {self.config.substeps}; got shape {p.shape}")
+        poses = [pose9_to_matrix(x) for x in p]
+        return self._move(world, poses[-1], poses)
+
+    def _move(self, world: World, target: np.ndarray, poses: list[np.ndarray]
+              ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        """One action to the (4, 4) spoon pose `target` through the IK pieces `poses` (`step`)."""
         start = self._pose_target
         cfg = self.config
         if cfg.freeze_distance is not None and len(world.particles):
             world.freeze(self._far_at_rest(world, start[:3, 3], target[:3, 3], cfg.freeze_distance))
-        pieces = cfg.ik_per_action
+        pieces = len(poses)
         steps = cfg.substeps
         joints_before = self._joint_target.copy()
         failed = False
         done = executed = 0
-        for k, joints, reached in self._track(start, target, self._joint_target):
+        for k, joints, reached in self._track(poses, self._joint_target):
             failed |= not reached
             n = (steps * (k + 1)) // pieces - done
             done += n
@@ -274,12 +295,26 @@ class ScoopEnv:
             return
         if self.config.joint_command == "stepwise":
             world.command_joints(joints)
-            world.step(n)
+            for _ in range(n):
+                self._physics_step(world)
             return
         velocity = (joints - previous) / (n * self.config.time_step)
         for i in range(1, n + 1):
             world.command_joints(previous + (joints - previous) * (i / n), velocity)
-            world.step(1)
+            self._physics_step(world)
+
+    def _physics_step(self, world: World) -> None:
+        """One physics step; in the lift and carry, the spoon's acceleration from its velocity
+        change over the step goes into `carry_peak_spoon_accel` (m/s^2)."""
+        world.step(1)
+        if self.tracker.stage not in ("lift", "carry"):
+            self._spoon_velocity = None
+            return
+        v = np.asarray(world.client.getBaseVelocity(world.spoon)[0], dtype=np.float64)
+        if self._spoon_velocity is not None:
+            accel = float(np.linalg.norm(v - self._spoon_velocity)) / self.config.time_step
+            self.carry_peak_spoon_accel = max(self.carry_peak_spoon_accel, accel)
+        self._spoon_velocity = v
 
     def set_stage(self, stage: str, rest_pull: bool | None = None) -> None:
         """Name the task stage the next actions belong to (scoop, lift, carry, pour, after_pour): every
@@ -289,6 +324,12 @@ class ScoopEnv:
         self._require_world()
         self.tracker.set_stage(stage)
         self.rest_pull = stage == "scoop" if rest_pull is None else bool(rest_pull)
+
+    @property
+    def pose_target(self) -> np.ndarray:
+        """(4, 4) the spoon pose the last action asked for (world frame, m): where the next one starts."""
+        self._require_world()
+        return self._pose_target.copy()
 
     def anchor_pose_target(self) -> None:
         """Make the next action start from the spoon pose the arm's joint target reaches (forward
@@ -310,18 +351,17 @@ class ScoopEnv:
             raise InputError(f"solver iterations must be in [1, {MAX_SOLVER_ITERATIONS}], got {n}")
         world.client.setPhysicsEngineParameter(numSolverIterations=n)
 
-    def _track(self, start: np.ndarray, target: np.ndarray, joints: np.ndarray,
+    def _track(self, poses: list[np.ndarray], joints: np.ndarray,
                rest_pull: bool | None = None) -> Iterator[tuple[int, np.ndarray, bool]]:
-        """The joint targets of one action: for each of the `ik_per_action` pieces of the pose path
-        from (4, 4) `start` to `target`, (piece index, joint target (7,), whether IK reached the piece).
-        An unreachable piece keeps the last reachable joint target. rest_pull: the IK's null-space
-        pull towards the rest posture (`PandaKinematics.solve`); None: as `set_stage` set it, on in
-        the scoop (the policies' and demonstrations' arm) and off in the scripted stages after it."""
+        """The joint targets of one action: for each of its pieces, the (4, 4) spoon poses `poses`,
+        (piece index, joint target (7,), whether IK reached the piece). An unreachable piece keeps
+        the last reachable joint target. rest_pull: the IK's null-space pull towards the rest
+        posture (`PandaKinematics.solve`); None: as `set_stage` set it, on in the scoop (the
+        policies' and demonstrations' arm) and off in the scripted stages after it."""
         cfg = self.config
         if rest_pull is None:
             rest_pull = self.rest_pull
-        for k in range(cfg.ik_per_action):
-            pose = interpolate_pose(start, target, (k + 1) / cfg.ik_per_action)
+        for k, pose in enumerate(poses):
             ik = self.kinematics.solve(pose @ self._hand_in_spoon, joints, cfg.ik_position_tolerance, cfg.ik_orientation_tolerance,
                                        rest_pull=rest_pull)
             if ik.ok:
@@ -343,7 +383,8 @@ class ScoopEnv:
         for action in np.asarray(path, dtype=np.float64).reshape(-1, 9):
             target = pose9_to_matrix(action)
             before, failed = joints, False
-            for _, joints, reached in self._track(start, target, joints, rest_pull):
+            pieces = [interpolate_pose(start, target, (k + 1) / self.config.ik_per_action) for k in range(self.config.ik_per_action)]
+            for _, joints, reached in self._track(pieces, joints, rest_pull):
                 failed |= not reached
             start = target
             unreachable.append(failed)
@@ -454,6 +495,9 @@ class ScoopEnv:
             "slowed_actions": self.slowed_actions,  # actions slowed to SimConfig.joint_speed_cap
             "action_time_s": self.action_time_s,  # simulated seconds the actions took since reset
             "arm_contact_steps": self.arm_contact_steps,  # actions that ended with the arm touching the table or a bowl
+            # the spoon's largest acceleration in the lift and carry, m/s^2, measured from its
+            # velocity at every physics step (what a heap on it feels; `_physics_step`)
+            "carry_peak_spoon_accel_mps2": self.carry_peak_spoon_accel,
         }
 
     # ---- internals ---------------------------------------------------------------------------

@@ -27,6 +27,14 @@ class TransferSettings:
     # to rest on the minimum-jerk profile (what a motion planner's time-parameterization gives a
     # robot); "constant": equal steps, full speed from the first action.
     profile: Literal["min_jerk", "constant"] = "min_jerk"
+    # How the arm moves between the actions of these stages. "cubic" (scoop-v9): along the C1 cubic
+    # spline through them (`geometry.cubic_pose_path`), one IK piece per physics step, so the
+    # spoon's velocity is continuous across actions, as a robot's trajectory controller moves
+    # between via points. "linear": straight at one speed within each action (`ScoopEnv.step`),
+    # which steps the velocity at every action: on the carry the spoon then takes 4.8-5.7 m/s^2 for
+    # one physics step where the min-jerk path asks 0.31 (docs/evaluation.md, "Velocity steps at
+    # action boundaries"). The scoop is the policies' and is not touched.
+    interpolation: Literal["cubic", "linear"] = "cubic"
     level_steps: int = 10  # actions over which the lift turns the spoon level (one sudden turn swings the arm)
     # Actions holding the lifted, level spoon still over the source bowl before the carry: what a
     # loose load sheds there falls back into the source bowl instead of onto the table on the way.
@@ -117,6 +125,7 @@ class TransferSettings:
         require(all(h > -0.03 for h in self.alternative_pour_heights), "transfer.alternative_pour_heights",
                 self.alternative_pour_heights, f"a list of heights {deep}")
         require(self.max_speed > 0, "transfer.max_speed", self.max_speed, "positive")
+        require(self.interpolation in ("cubic", "linear"), "transfer.interpolation", self.interpolation, "cubic or linear")
         require(self.pour_axis in ("roll", "tip"), "transfer.pour_axis", self.pour_axis, "roll or tip")
         require(self.pour_steps >= 1, "transfer.pour_steps", self.pour_steps, "at least 1")
         require(self.level_steps >= 1, "transfer.level_steps", self.level_steps, "at least 1")

@@ -203,3 +203,62 @@ def test_slowed_steps_are_what_the_fastest_joint_needs():
         SimConfig(joint_speed_cap=0.0)
     with pytest.raises(ConfigError, match="ik_per_action"):
         SimConfig(ik_per_action=13)  # more pieces than the 12 physics steps of an action
+
+
+def _lift_and_carry_peak(interpolation: str) -> tuple[float, float]:
+    """(measured peak spoon acceleration, commanded per-action peak), m/s^2, of an empty spoon
+    lifted 10 cm and carried 20 cm on min-jerk profiles (the transfer's) at the control rate."""
+    from grits_lab.evaluation.transfer import min_jerk
+    from grits_lab.geometry import cubic_pose_path
+
+    env = ScoopEnv()
+    try:
+        obs, _ = env.reset(seed=0, options={"food": "orange", "n_particles": 0})
+        start = obs["ee_pose"].astype(np.float64)
+        up, end = start.copy(), start.copy()
+        up[2] += 0.10
+        end[2] += 0.10
+        end[0] -= 0.20
+        path = np.concatenate([[start + (up - start) * f for f in min_jerk(10)],
+                               [up + (end - up) * f for f in min_jerk(20)], [end] * 5])
+        stages = ["lift"] * 10 + ["carry"] * 25
+        via = cubic_pose_path(matrix_to_pose9(env.pose_target), path, env.config.substeps)
+        for action, stage, poses in zip(path, stages, via):
+            if env.tracker.stage != stage:
+                env.set_stage(stage)
+            env.step(action) if interpolation == "linear" else env.step_along(poses)
+        commanded = np.diff(np.diff(path[:, :3], axis=0), axis=0) * env.config.control_hz**2
+        return env.metrics()["carry_peak_spoon_accel_mps2"], float(np.linalg.norm(commanded, axis=1).max())
+    finally:
+        env.close()
+
+
+def test_the_cubic_path_through_actions_spares_the_spoon_the_velocity_steps_of_straight_actions():
+    linear, asked = _lift_and_carry_peak("linear")
+    cubic, _ = _lift_and_carry_peak("cubic")
+    # Straight actions step the velocity at every action: the spoon takes it within a physics
+    # step, several times what the path asks. Through the spline it feels about what is asked.
+    assert linear > 5 * asked
+    assert cubic < 2 * asked
+    assert cubic < 0.2 * linear
+
+
+def test_step_along_the_straight_pieces_is_step(env):
+    from grits_lab.errors import InputError
+    from grits_lab.sim.env import interpolate_pose, pose9_to_matrix
+
+    env.reset(seed=0, options={"food": "soybeans", "n_particles": 0})
+    start = matrix_to_pose9(env.pose_target)
+    target = start.copy()
+    target[2] += 0.01
+    pieces = np.stack([matrix_to_pose9(interpolate_pose(env.pose_target, pose9_to_matrix(target), (k + 1) / env.config.ik_per_action))
+                       for k in range(env.config.ik_per_action)])
+    info = env.step_along(pieces)[4]
+    joints = env._joint_target.copy()
+    env.reset(seed=0, options={"food": "soybeans", "n_particles": 0})
+    assert env.step(target)[4]["joint_step"] == pytest.approx(info["joint_step"], abs=1e-9)
+    np.testing.assert_allclose(env._joint_target, joints, atol=1e-9)
+    np.testing.assert_allclose(env.pose_target[:3, 3], target[:3], atol=1e-12)
+    for bad in (np.zeros((0, 9)), np.zeros((env.config.substeps + 1, 9)), np.full((2, 9), np.nan), np.zeros((2, 7))):
+        with pytest.raises(InputError, match="poses must be finite"):
+            env.step_along(bad)
