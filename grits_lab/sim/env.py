@@ -511,11 +511,17 @@ class ScoopEnv:
         return self._home_joints.copy()
 
     def _classify(self, positions: np.ndarray | None = None):
+        """The particles' `ParticleCounts` now; `carried` is looked up (`World.carried_by_spoon`) when
+        a particle not yet counted spilled lies outside the spoon and both bowls."""
         w = self._require_world()
         if positions is None:
             positions = w.particle_positions()
-        return classify(positions, w.spoon_matrix(), w.source_bowl_position, w.target_bowl_position,
-                        w.source_geometry, w.target_geometry, w.spoon_geometry)
+        counts = classify(positions, w.spoon_matrix(), w.source_bowl_position, w.target_bowl_position,
+                          w.source_geometry, w.target_geometry, w.spoon_geometry)
+        outside = counts.outside_source & ~counts.in_target
+        if (outside & ~counts.in_spoon & ~self.tracker.spilled_flags).any():
+            counts.carried = w.carried_by_spoon(through=outside | counts.in_spoon)
+        return counts
 
     def _obs(self) -> dict[str, np.ndarray]:
         w = self._require_world()

@@ -39,6 +39,9 @@ class ParticleCounts:
     outside_source: np.ndarray
     lifted: np.ndarray  # in the spoon and above the source bowl's rim
     in_source: np.ndarray  # inside the source bowl: within its outer rim radius, below its rim
+    # Outside the spoon's volume but held by it through contacts (`World.carried_by_spoon`): the
+    # overhang of a heap. None: not looked up (nothing was outside the spoon and both bowls).
+    carried: np.ndarray | None = None
 
 
 def in_spoon_frame(positions: np.ndarray, spoon_pose: np.ndarray) -> np.ndarray:
@@ -134,6 +137,13 @@ def stage_columns(stage: str) -> list[str]:
     return [f"spilled_{stage}_{cause}" for cause in SPILL_CAUSES]
 
 
+def loose(counts: ParticleCounts) -> np.ndarray:
+    """(N,) particles counted spilled now: outside the source bowl, the spoon and the target bowl,
+    and not held by the spoon (`ParticleCounts.carried`)."""
+    now = counts.outside_source & ~counts.in_spoon & ~counts.in_target
+    return now if counts.carried is None else now & ~counts.carried
+
+
 class SpillTracker:
     """Keeps the per-particle spilled flags, the spilled count after every action step, and for
     every spilled particle the stage and cause of its spill (docs/evaluation.md, "Where food is lost").
@@ -149,6 +159,9 @@ class SpillTracker:
       (a faster one is slowed), so the cause stays empty and such losses count as off_spoon.
     - poured_outside: it came off the spoon in the pour or after it and landed outside the target.
     - off_spoon: it came off the spoon (or off the heap the spoon carries) while the spoon moved.
+    A grain the spoon still holds through contacts (`ParticleCounts.carried`, the overhang of a
+    heap) is not spilled, however far outside the spoon's volume its centre lies: it is counted
+    when it leaves the load, in the stage it leaves it.
     A particle that comes to rest in the target bowl is no longer counted (its flag is cleared), so
     one that bounces out later counts once more, as bounced_out.
     """
@@ -180,7 +193,7 @@ class SpillTracker:
         """Account for the state after one action; `thrown`: the arm executed that action faster than
         the Panda's limit allows (ScoopEnv.step). Returns the spilled count."""
         self._since_throw = 0 if thrown else self._since_throw + 1
-        now = counts.outside_source & ~counts.in_spoon & ~counts.in_target
+        now = loose(counts)
         new = now & ~self.spilled_flags
         if new.any():
             stage = SPILL_STAGES.index(self.stage)

@@ -77,6 +77,23 @@ class World:
         v = np.array([c.getBaseVelocity(int(b))[0] for b in self.particles], dtype=np.float64).reshape(-1, 3)
         return np.linalg.norm(v, axis=1)
 
+    def carried_by_spoon(self, through: np.ndarray) -> np.ndarray:
+        """(N,) particles the spoon holds through a chain of contacts: touching it, or touching a
+        particle it holds, in the contacts of the last physics step. Chains run only through the
+        particles `through` (N,) bool (those not resting in a bowl), so a spoon in the source
+        bowl does not hold the whole pile. A grain on the heap's overhang, outside the spoon's
+        volume, is held; one falling or lying on the table is not."""
+        index = {int(b): i for i, b in enumerate(self.particles)}
+        held = np.zeros(len(self.particles), dtype=bool)
+        frontier = [int(self.spoon)]
+        while frontier:
+            for contact in self.client.getContactPoints(bodyA=frontier.pop()):
+                i = index.get(int(contact[2]))
+                if i is not None and through[i] and not held[i]:
+                    held[i] = True
+                    frontier.append(int(self.particles[i]))
+        return held
+
     def particle_radii(self) -> np.ndarray:
         """(N,) footprint radius of each particle (see SampledParticles.footprint_radius)."""
         radii = np.array([p.footprint_radius for p in self.particle_components])

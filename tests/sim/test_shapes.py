@@ -136,3 +136,33 @@ def test_the_support_extends_only_the_floor_downwards():
     assert sum(a != b for a, b in zip(plain, supported)) == 7  # the floor's strips
     with pytest.raises(ValueError, match="support_depth"):
         bowl_boxes(BowlGeometry(), -0.01)
+
+
+def test_the_spoon_holds_a_grain_stacked_on_its_load_and_not_one_on_the_table():
+    """`World.carried_by_spoon`: contact chains from the spoon, through the allowed particles only."""
+    from grits_lab.sim import ScoopEnv
+    from grits_lab.sim.spill_metrics import in_spoon_frame
+
+    env = ScoopEnv()
+    try:
+        env.reset(seed=0, options={"food": "chocolate_balls", "level": "low"})
+        world = env.world
+        spoon = world.spoon_matrix()
+        r = float(world.particle_radii()[0])
+        # The spoon rests at home above the table; put grain 0 on its floor, grain 1 on grain 0,
+        # grain 2 on the table far from everything.
+        floor = spoon[:3, 3] + spoon[:3, 2] * (world.spoon_geometry.thickness / 2 + r)
+        places = [floor, floor + spoon[:3, 2] * 2 * r, np.array([0.3, -0.4, r])]
+        for body, place in zip(world.particles[:3], places):
+            world.client.resetBasePositionAndOrientation(int(body), place.tolist(), [0, 0, 0, 1])
+            world.client.resetBaseVelocity(int(body), [0, 0, 0], [0, 0, 0])
+        world.step(5)  # contacts are those of the last physics step
+        assert in_spoon_frame(world.particle_positions()[:2], world.spoon_matrix())[:, 2].min() > 0  # still on the spoon
+        every = np.ones(len(world.particles), dtype=bool)
+        held = world.carried_by_spoon(through=every)
+        assert held[:3].tolist() == [True, True, False]
+        through = every.copy()
+        through[0] = False  # chains may not run through grain 0: grain 1 only touches grain 0
+        assert world.carried_by_spoon(through=through)[:3].tolist() == [False, False, False]
+    finally:
+        env.close()

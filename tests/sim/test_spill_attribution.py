@@ -49,6 +49,23 @@ def test_a_grain_riding_the_heap_above_the_bowl_and_landing_outside_falls_off_th
     assert _only(tracker, after) == {("lift", "off_spoon"): 1}
 
 
+def test_a_grain_held_on_the_heaps_overhang_is_not_spilled_until_it_leaves_the_load_in_a_later_stage():
+    tracker = SpillTracker(2)
+    tracker.set_stage("carry")
+    loaded = _counts([True, True], [True, True], in_source=[False, False])
+    tracker.observe(loaded)
+    # Grain 1's centre is outside the spoon's volume (the heap's overhang) but the spoon holds it.
+    overhang = _counts([True, False], [True, True], in_source=[False, False])
+    overhang.carried = np.array([False, True])
+    assert tracker.update(overhang) == 0
+    tracker.set_stage("pour")  # it leaves the load in the pour and lands beside the target
+    fallen = _counts([True, False], [True, True], in_source=[False, False])
+    fallen.carried = np.array([False, False])
+    assert tracker.update(fallen) == 1
+    assert _only(tracker, fallen) == {("pour", "poured_outside"): 1}
+    assert tracker.spill_step.tolist() == [-1, 1]  # counted from the action it left the load
+
+
 def test_food_poured_beside_the_target_bowl_is_poured_outside_and_food_in_it_is_delivered():
     tracker = SpillTracker(2)
     tracker.set_stage("pour")
