@@ -1,4 +1,5 @@
-"""`grits-lab compare-predictors CONFIG... --eval DATASET`: held-out table of trained predictors."""
+"""`grits-lab compare-predictors CONFIG... --eval DATASET`: held-out table of trained predictors.
+`grits-lab compare-runs BEFORE AFTER`: two evaluation runs on the same seeds, episode by episode."""
 
 from __future__ import annotations
 
@@ -32,6 +33,30 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     retire(parser, "--out", "--output-dir (the comparison goes to OUTPUT_DIR/comparison_<dataset>)")
     retire(parser, "--seed", "--bootstrap-seed")
     parser.set_defaults(handler=_run)
+
+    runs = subparsers.add_parser(
+        "compare-runs",
+        help="two evaluation runs on the same seeds, episode by episode: equal scoops and paired outcome changes",
+        description=(
+            "Pair the episodes of two run directories by method, food, level and trial (their seeds must agree) and "
+            "print, per method, how many scoops are equal and each outcome's count in both runs with the episodes "
+            "that changed either way and an exact sign test on them (grits_lab/report/run_compare.py)."
+        ),
+    )
+    runs.add_argument("before", metavar="BEFORE", help="run directory of `grits-lab evaluate` (the reference)")
+    runs.add_argument("after", metavar="AFTER", help="run directory on the same seeds")
+    runs.add_argument("--output-dir", metavar="DIR", help="also write comparison.csv and comparison.md there")
+    runs.set_defaults(handler=_compare_runs)
+
+
+def _compare_runs(args: argparse.Namespace) -> int:
+    from grits_lab.report.run_compare import compare_run_dirs, write_comparison
+
+    table, markdown = compare_run_dirs(args.before, args.after)
+    print(markdown)
+    if args.output_dir:
+        print(f"written: {', '.join(str(f) for f in write_comparison(table, markdown, args.output_dir))}")
+    return 0
 
 
 def _run(args: argparse.Namespace) -> int:

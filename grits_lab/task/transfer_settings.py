@@ -32,8 +32,8 @@ class TransferSettings:
     # spoon's velocity is continuous across actions, as a robot's trajectory controller moves
     # between via points. "linear": straight at one speed within each action (`ScoopEnv.step`),
     # which steps the velocity at every action: on the carry the spoon then takes 4.8-5.7 m/s^2 for
-    # one physics step where the min-jerk path asks 0.31 (docs/evaluation.md, "Velocity steps at
-    # action boundaries"). The scoop is the policies' and is not touched.
+    # one physics step where the min-jerk path asks 0.31 (docs/evaluation.md, "A smooth path
+    # through the actions"). The scoop is the policies' and is not touched.
     interpolation: Literal["cubic", "linear"] = "cubic"
     level_steps: int = 10  # actions over which the lift turns the spoon level (one sudden turn swings the arm)
     # Actions holding the lifted, level spoon still over the source bowl before the carry: what a

@@ -196,3 +196,25 @@ def test_a_planted_checkpoint_with_its_digest_in_the_records_is_refused_and_neve
     with pytest.raises(InputError, match=f"refused checkpoint {planted}"):
         replay_episode(copied, **episode(records, "dp"))
     assert not marker.exists()
+
+
+def test_the_filmed_and_counted_envs_see_the_actions_of_the_smooth_stages_too():
+    """The stages after the scoop step through `ScoopEnv.step_along`: a replay films and counts those actions."""
+    import numpy as np
+
+    from grits_lab.report.replay import _CountedEnv, _FilmedEnv
+    from grits_lab.sim import ScoopEnv
+    from grits_lab.sim.env import matrix_to_pose9
+
+    env = ScoopEnv()
+    try:
+        ticks = []
+        filmed = _FilmedEnv(env, "title", SMALL_CAMERA, every=1)
+        played = _CountedEnv(filmed, lambda: ticks.append(1))
+        played.reset(seed=0, options={"food": "soybeans", "n_particles": 0})
+        pose = matrix_to_pose9(env.pose_target)
+        played.step(pose)
+        played.step_along(np.stack([pose, pose]))
+        assert len(filmed.frames) == 3 and len(ticks) == 2  # the reset's frame, then one per action
+    finally:
+        env.close()

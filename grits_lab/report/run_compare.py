@@ -1,0 +1,130 @@
+"""Two evaluation runs on the same seeds, episode by episode: which scoops stayed the same, which
+outcomes changed and in which direction (`grits-lab compare-runs BEFORE AFTER`).
+
+Episodes are paired by method, food, level and trial, and a pair must share its seed. For every
+method the table gives the paired episodes, how many scoops are equal (every column of
+`SCOOP_COLUMNS` equal), and for each outcome of `PAIRED_OUTCOMES` its count in each run, the
+episodes where only one run had it, and the exact two-sided sign test (McNemar's exact test) on
+those discordant pairs.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pandas as pd
+
+from grits_lab.errors import InputError
+from grits_lab.io import write_text_atomic
+from grits_lab.report.run_records import load_run
+from grits_lab.report.spill_tables import spilled_after_scoop
+from grits_lab.report.vocabulary import method_display
+
+PAIR_KEYS = ("method", "food", "level", "trial")
+# What the scoop ended with: equal in both runs means the scoop was not changed.
+SCOOP_COLUMNS = ("scooped", "spilled", "scoop_success", "scoop_steps")
+# Outcome -> its name in the table. spill_after_scoop: a particle lost in the lift, carry, pour or after it.
+PAIRED_OUTCOMES = {
+    "task_success": "task success",
+    "spillage": "spill during the scoop",
+    "spill_after_scoop": "spill after the scoop",
+    "scoop_failure": "scoop failure",
+}
+
+
+def sign_test_p(only_before: int, only_after: int) -> float:
+    """Exact two-sided sign test on the discordant pairs (McNemar's exact test): the probability,
+    under no change (each discordant pair equally likely either way), of a split at least as
+    uneven. 1.0 without discordant pairs."""
+    n, k = only_before + only_after, min(only_before, only_after)
+    if n == 0:
+        return 1.0
+    tail = sum(math.comb(n, i) for i in range(k + 1)) / 2.0**n
+    return min(1.0, 2.0 * tail)
+
+
+def _episodes(run_dir: str | Path) -> pd.DataFrame:
+    frame = load_run(run_dir).episodes
+    if frame is None or frame.empty:
+        raise InputError(f"{run_dir}: no episode records to compare")
+    missing = [c for c in (*PAIR_KEYS, "seed", *SCOOP_COLUMNS) if c not in frame.columns]
+    if missing:
+        raise InputError(f"{run_dir}: the records lack {', '.join(missing)}, which pairing episodes needs")
+    frame = frame.copy()
+    frame["spill_after_scoop"] = spilled_after_scoop(frame) > 0
+    return frame
+
+
+def paired_episodes(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
+    """One row per episode in both frames (`PAIR_KEYS`), columns suffixed `_before` / `_after`.
+    InputError when no episode pairs or a pair's seeds differ (not the same protocol seeds)."""
+    both = before.merge(after, on=list(PAIR_KEYS), suffixes=("_before", "_after"))
+    if both.empty:
+        raise InputError("the two runs share no episode (method, food, level, trial)")
+    differ = both[both["seed_before"] != both["seed_after"]]
+    if len(differ):
+        row = differ.iloc[0]
+        raise InputError(f"{len(differ)} paired episodes have different seeds, e.g. {row['method']} {row['food']}/{row['level']} "
+                         f"trial {row['trial']}: {row['seed_before']} against {row['seed_after']}; compare runs of the same root seed")
+    return both
+
+
+def _equal(a: pd.Series, b: pd.Series) -> pd.Series:
+    return (a == b) | (a.isna() & b.isna())
+
+
+def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
+    """Per method (one row each, in `before`'s order): paired episodes, equal scoops, and for every
+    outcome of `PAIRED_OUTCOMES` the columns `<outcome>_before`, `_after` (episodes with it),
+    `_only_before`, `_only_after` and `_p` (`sign_test_p`). Episodes with an error in either run
+    are left out (`errors` counts them)."""
+    both = paired_episodes(before, after)
+    rows = []
+    for method in dict.fromkeys(both["method"]):
+        pairs = both[both["method"] == method]
+        errors = pairs["is_error_before"] | pairs["is_error_after"]
+        pairs = pairs[~errors]
+        same = pd.Series(True, index=pairs.index)
+        for column in SCOOP_COLUMNS:
+            same &= _equal(pairs[f"{column}_before"], pairs[f"{column}_after"])
+        row = {"method": method, "paired": int(len(pairs)), "errors": int(errors.sum()), "scoop_equal": int(same.sum())}
+        for outcome in PAIRED_OUTCOMES:
+            a, b = pairs[f"{outcome}_before"].astype(bool), pairs[f"{outcome}_after"].astype(bool)
+            row.update({f"{outcome}_before": int(a.sum()), f"{outcome}_after": int(b.sum()),
+                        f"{outcome}_only_before": int((a & ~b).sum()), f"{outcome}_only_after": int((b & ~a).sum())})
+            row[f"{outcome}_p"] = sign_test_p(row[f"{outcome}_only_before"], row[f"{outcome}_only_after"])
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def comparison_markdown(table: pd.DataFrame, before: str, after: str) -> str:
+    """The comparison as a Markdown table with its caption."""
+    head = ["Method", "Paired", "Scoop equal"] + [name for name in PAIRED_OUTCOMES.values()]
+    lines = ["| " + " | ".join(head) + " |", "|---|" + "---:|" * (len(head) - 1)]
+    for _, row in table.iterrows():
+        cells = [method_display(row["method"]), str(row["paired"]), f"{row['scoop_equal']}/{row['paired']}"]
+        for outcome in PAIRED_OUTCOMES:
+            cells.append(f"{row[f'{outcome}_before']} → {row[f'{outcome}_after']} "
+                         f"(−{row[f'{outcome}_only_before']} +{row[f'{outcome}_only_after']}, p {row[f'{outcome}_p']:.2g})")
+        lines.append("| " + " | ".join(cells) + " |")
+    lines.append("")
+    lines.append(f"Episodes with each outcome, {before} → {after}, on the same seeds; (−a +b): episodes that had it only "
+                 "in the first run, only in the second; p: exact two-sided sign test on those. Scoop equal: scooped, "
+                 "spilled, scoop success and scoop length all equal. Episodes with an error in either run are left out.")
+    return "\n".join(lines)
+
+
+def write_comparison(table: pd.DataFrame, markdown: str, output_dir: str | Path) -> list[Path]:
+    """comparison.csv and comparison.md in `output_dir` (created), written atomically."""
+    out = Path(output_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(out / "comparison.csv", table.to_csv(index=False))
+    write_text_atomic(out / "comparison.md", markdown + "\n")
+    return [out / "comparison.csv", out / "comparison.md"]
+
+
+def compare_run_dirs(before: str | Path, after: str | Path) -> tuple[pd.DataFrame, str]:
+    """`compare_runs` on the records of two run directories, and its Markdown."""
+    table = compare_runs(_episodes(before), _episodes(after))
+    return table, comparison_markdown(table, Path(before).name, Path(after).name)

@@ -1,0 +1,60 @@
+"""`grits-lab compare-runs`: two runs on the same seeds, paired episode by episode."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+
+from grits_lab.cli import main
+from grits_lab.errors import InputError
+from grits_lab.report.run_compare import compare_runs, paired_episodes, sign_test_p
+from grits_lab.report.run_records import normalize_records
+from grits_lab.sim.spill_metrics import attribution_columns
+from tests.report.synthetic_records import episode
+
+
+def _run(outcomes: list[tuple[str, int, int]], tmp_path, name: str) -> pd.DataFrame:
+    """dp episodes on sago/low, trials 0.., each (outcome, scoop_steps, particles lost in the carry)."""
+    rows = []
+    for trial, (outcome, steps, carry) in enumerate(outcomes):
+        row = episode("dp", "sago", "low", trial, outcome)
+        row.update({c: 0 for c in attribution_columns()}, scoop_steps=steps, spilled_carry_off_spoon=carry)
+        rows.append(row)
+    frame = pd.DataFrame(rows)
+    (tmp_path / name).mkdir()
+    frame.to_parquet(tmp_path / name / "episodes.parquet")
+    return frame
+
+
+def test_the_sign_test_is_the_exact_binomial_tail():
+    assert sign_test_p(0, 0) == 1.0
+    assert sign_test_p(0, 5) == pytest.approx(2 / 32)  # 5 of 5 one way
+    assert sign_test_p(1, 4) == pytest.approx(2 * 6 / 32)  # at most 1 of 5 either way
+    assert sign_test_p(3, 3) == 1.0
+
+
+def test_paired_episodes_count_equal_scoops_and_outcomes_changed_either_way(tmp_path, capsys):
+    before = _run([("success", 40, 0), ("transfer_fail", 40, 2), ("transfer_fail", 40, 1), ("spill", 40, 0)], tmp_path, "before")
+    after = _run([("success", 40, 0), ("success", 40, 0), ("transfer_fail", 40, 1), ("spill", 41, 0)], tmp_path, "after")
+    table = compare_runs(normalize_records(before).assign(spill_after_scoop=lambda f: f["spilled_carry_off_spoon"] > 0),
+                         normalize_records(after).assign(spill_after_scoop=lambda f: f["spilled_carry_off_spoon"] > 0))
+    row = table.set_index("method").loc["dp"]
+    assert row["paired"] == 4 and row["scoop_equal"] == 3  # trial 3's scoop took one action more
+    assert (row["task_success_before"], row["task_success_after"]) == (1, 2)
+    assert (row["task_success_only_before"], row["task_success_only_after"]) == (0, 1)
+    assert (row["spill_after_scoop_before"], row["spill_after_scoop_after"], row["spill_after_scoop_only_before"]) == (2, 1, 1)
+    assert main(["compare-runs", str(tmp_path / "before"), str(tmp_path / "after"), "--output-dir", str(tmp_path / "cmp")]) == 0
+    out = capsys.readouterr().out
+    assert "| Diffusion Policy | 4 | 3/4 | 1 → 2 (−0 +1, p 1) |" in out
+    assert (tmp_path / "cmp" / "comparison.csv").is_file() and (tmp_path / "cmp" / "comparison.md").is_file()
+
+
+def test_runs_on_other_seeds_are_refused(tmp_path, capsys):
+    _run([("success", 40, 0)], tmp_path, "before")
+    other = _run([("success", 40, 0)], tmp_path, "other").assign(seed=12345)
+    other.to_parquet(tmp_path / "other" / "episodes.parquet")
+    assert main(["compare-runs", str(tmp_path / "before"), str(tmp_path / "other")]) != 0
+    assert "different seeds" in capsys.readouterr().err
+    before = normalize_records(pd.read_parquet(tmp_path / "before" / "episodes.parquet"))
+    with pytest.raises(InputError, match="share no episode"):
+        paired_episodes(before, before.assign(food="orange"))
