@@ -7,8 +7,9 @@ A page holds generated blocks between two markers; everything outside them is ha
     <!-- end generated -->
 
 KIND is one of BLOCKS: `outcomes`, `stages`, `provenance`, `headline` and `claims` read the
-summary files of docs/experiments/EXPERIMENT/ (grits_lab/report/summary.py); `index` lists every
-experiment folder. `grits-lab results check` (and tests/report/test_results_pages.py) fails when
+summary files of docs/experiments/EXPERIMENT/ (grits_lab/report/summary.py); `comparison` reads
+the paired comparison `grits-lab compare-runs` writes there; `index` lists every experiment
+folder. `grits-lab results check` (and tests/report/test_results_pages.py) fails when
 a page differs from what its summaries render.
 """
 
@@ -26,6 +27,7 @@ import pandas as pd
 from grits_lab.errors import InputError
 from grits_lab.intervals import format_percent
 from grits_lab.records import OUTCOME_COLUMNS
+from grits_lab.report.run_compare import COMPARISON_FILE, comparison_markdown
 from grits_lab.report.spill_tables import CAUSE_NAMES, STAGE_NAMES
 from grits_lab.report.summary import CLAIMS_FILE, PROVENANCE_FILE, STAGES_FILE, SUMMARY_FILE
 from grits_lab.report.vocabulary import MAIN_METHODS, PAPER_RESULTS
@@ -103,13 +105,16 @@ class _NotSummarised(Exception):
     """An experiment folder without its summary yet: the block says so and names the command."""
 
 
-def _folder(root: Path, name: str) -> Path:
-    """docs/experiments/NAME; InputError when the folder does not exist (a misspelt name)."""
+def _folder(root: Path, name: str, needs: str = SUMMARY_FILE) -> Path:
+    """docs/experiments/NAME holding the file `needs`; InputError when the folder does not exist (a
+    misspelt name), _NotSummarised naming the command that writes a missing file."""
     folder = root / EXPERIMENTS_DIR / name
     if not folder.is_dir():
         raise InputError(f"no experiment `{name}`: {folder} does not exist")
-    if not (folder / SUMMARY_FILE).is_file():
-        raise _NotSummarised(f"No summary yet: `grits-lab report RUN_DIR --summary-to {EXPERIMENTS_DIR / name}`, "
+    if not (folder / needs).is_file():
+        writer = (f"grits-lab compare-runs BEFORE_RUN AFTER_RUN --output-dir {EXPERIMENTS_DIR / name}" if needs == COMPARISON_FILE
+                  else f"grits-lab report RUN_DIR --summary-to {EXPERIMENTS_DIR / name}")
+        raise _NotSummarised(f"No {'comparison' if needs == COMPARISON_FILE else 'summary'} yet: `{writer}`, "
                              "then `grits-lab results render`.")
     return folder
 
@@ -227,6 +232,12 @@ def claims_block(root: Path, name: str, here: Path) -> str:
     return _markdown(list(claims.columns), [list(map(str, row)) for row in claims.itertuples(index=False)], right=99)
 
 
+def comparison_block(root: Path, name: str, here: Path) -> str:
+    """Two runs on the same seeds, paired (`grits-lab compare-runs ... --output-dir docs/experiments/NAME`)."""
+    table = pd.read_csv(_folder(root, name, needs=COMPARISON_FILE) / COMPARISON_FILE)
+    return f"{comparison_markdown(table)} File: [{COMPARISON_FILE}]({_link(root, name, COMPARISON_FILE, here)})."
+
+
 def index_block(root: Path, name: str | None, here: Path) -> str:
     """Every experiment folder: its page's title, protocol and episodes per method."""
     rows = []
@@ -250,6 +261,7 @@ BLOCKS: dict[str, Callable[[Path, str, Path], str]] = {
     "provenance": provenance_block,
     "headline": headline_block,
     "claims": claims_block,
+    "comparison": comparison_block,
     "index": index_block,
 }
 

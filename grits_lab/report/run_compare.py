@@ -22,6 +22,7 @@ from grits_lab.report.spill_tables import spilled_after_scoop
 from grits_lab.report.vocabulary import method_display
 
 PAIR_KEYS = ("method", "food", "level", "trial")
+COMPARISON_FILE = "comparison.csv"
 # What the scoop ended with: equal in both runs means the scoop was not changed.
 SCOOP_COLUMNS = ("scooped", "spilled", "scoop_success", "scoop_steps")
 # Outcome -> its name in the table. spill_after_scoop: a particle lost in the lift, carry, pour or after it.
@@ -98,8 +99,9 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def comparison_markdown(table: pd.DataFrame, before: str, after: str) -> str:
-    """The comparison as a Markdown table with its caption."""
+def comparison_markdown(table: pd.DataFrame) -> str:
+    """The comparison (`compare_run_dirs`'s table, which names its runs) as a Markdown table with its caption."""
+    before, after = str(table["before"].iloc[0]), str(table["after"].iloc[0])
     head = ["Method", "Paired", "Scoop equal"] + [name for name in PAIRED_OUTCOMES.values()]
     lines = ["| " + " | ".join(head) + " |", "|---|" + "---:|" * (len(head) - 1)]
     for _, row in table.iterrows():
@@ -116,15 +118,18 @@ def comparison_markdown(table: pd.DataFrame, before: str, after: str) -> str:
 
 
 def write_comparison(table: pd.DataFrame, markdown: str, output_dir: str | Path) -> list[Path]:
-    """comparison.csv and comparison.md in `output_dir` (created), written atomically."""
+    """COMPARISON_FILE and comparison.md in `output_dir` (created), written atomically. In an
+    experiment's folder the page's `comparison` block renders the CSV (grits_lab/report/results_pages.py)."""
     out = Path(output_dir)
     out.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(out / "comparison.csv", table.to_csv(index=False))
+    write_text_atomic(out / COMPARISON_FILE, table.to_csv(index=False))
     write_text_atomic(out / "comparison.md", markdown + "\n")
-    return [out / "comparison.csv", out / "comparison.md"]
+    return [out / COMPARISON_FILE, out / "comparison.md"]
 
 
 def compare_run_dirs(before: str | Path, after: str | Path) -> tuple[pd.DataFrame, str]:
     """`compare_runs` on the records of two run directories, and its Markdown."""
     table = compare_runs(_episodes(before), _episodes(after))
-    return table, comparison_markdown(table, Path(before).name, Path(after).name)
+    table.insert(0, "after", Path(after).name)
+    table.insert(0, "before", Path(before).name)
+    return table, comparison_markdown(table)

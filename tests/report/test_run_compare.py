@@ -58,3 +58,16 @@ def test_runs_on_other_seeds_are_refused(tmp_path, capsys):
     before = normalize_records(pd.read_parquet(tmp_path / "before" / "episodes.parquet"))
     with pytest.raises(InputError, match="share no episode"):
         paired_episodes(before, before.assign(food="orange"))
+
+
+def test_an_experiment_page_renders_the_comparison_written_into_its_folder(tmp_path):
+    from grits_lab.report.results_pages import render_all
+
+    _run([("success", 40, 0), ("transfer_fail", 40, 2)], tmp_path, "v1")
+    _run([("success", 40, 0), ("success", 40, 0)], tmp_path, "v2")
+    folder = tmp_path / "docs" / "experiments" / "v2"
+    assert main(["compare-runs", str(tmp_path / "v1"), str(tmp_path / "v2"), "--output-dir", str(folder)]) == 0
+    (folder / "README.md").write_text("# v2\n\n<!-- generated: comparison v2 -->\n<!-- end generated -->\n")
+    page = render_all(tmp_path)[folder / "README.md"]
+    assert "| Diffusion Policy | 2 | 2/2 | 1 → 2 (−0 +1, p 1) |" in page
+    assert "v1 → v2, on the same seeds" in page and "[comparison.csv](comparison.csv)" in page
