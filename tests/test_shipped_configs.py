@@ -59,6 +59,21 @@ def test_the_previous_transfer_override_and_the_oracle_use_seeds_no_evaluation_u
     assert oracle.seed not in used
 
 
+def test_the_policys_training_rollouts_are_on_training_foods_and_seeds_nothing_else_uses():
+    from grits_lab.config import load_yaml
+    from grits_lab.evaluation.evaluation_config import load_evaluation_config
+    from grits_lab.sim.foods import load_foods
+
+    rollouts = load_evaluation_config(ROOT / "experiments" / "dp_rollouts_train.yaml")
+    assert rollouts.methods == ["dp"] and rollouts.rollout_chunks
+    assert set(rollouts.foods) <= set(load_foods().names("train"))
+    used = {load_evaluation_config(p).seed for p in (ROOT / "experiments").glob("*.yaml")
+            if "methods" in load_yaml(p) and p.name != "dp_rollouts_train.yaml"}
+    used |= {load_yaml(p).get("validation", {}).get("seed") for p in (ROOT / "sweeps").glob("*.yaml")}
+    used |= {load_yaml(p).get("seed") for p in (ROOT / "experiments").glob("*.yaml") if "kind" in load_yaml(p)}  # datasets
+    assert rollouts.seed not in used
+
+
 @pytest.mark.parametrize("guidance, fragment", [
     ({"threshold": 30}, "unknown key `guidance.threshold`"),
     ({"rho": -1.0}, "`guidance.rho` must be non-negative"),
