@@ -18,7 +18,7 @@ import pandas as pd
 from grits_lab.errors import InputError
 from grits_lab.io import write_text_atomic
 from grits_lab.report.run_records import load_run
-from grits_lab.report.spill_tables import spilled_after_scoop
+from grits_lab.report.spill_tables import has_attribution, spilled_after_scoop
 from grits_lab.report.vocabulary import method_display
 
 PAIR_KEYS = ("method", "food", "level", "trial")
@@ -52,7 +52,15 @@ def _episodes(run_dir: str | Path) -> pd.DataFrame:
     missing = [c for c in (*PAIR_KEYS, "seed", *SCOOP_COLUMNS) if c not in frame.columns]
     if missing:
         raise InputError(f"{run_dir}: the records lack {', '.join(missing)}, which pairing episodes needs")
+    twice = frame.duplicated(list(PAIR_KEYS), keep=False)
+    if twice.any():
+        row = frame[twice].iloc[0]
+        raise InputError(f"{run_dir}: {int(twice.sum())} records share their episode, e.g. {row['method']} {row['food']}/{row['level']} "
+                         f"trial {row['trial']} (a method at several guidance settings or predictors); compare runs of one setting each")
     frame = frame.copy()
+    if not has_attribution(frame):
+        raise InputError(f"{run_dir}: the records predate the per-stage spill columns (`spilled_<stage>_<cause>`); "
+                         "compare runs of scoop-v4 or later")
     frame["spill_after_scoop"] = spilled_after_scoop(frame) > 0
     return frame
 

@@ -24,7 +24,7 @@ from grits_lab.sim.cameras import CameraImage, render
 from grits_lab.sim.sim_config import MAX_SOLVER_ITERATIONS, SimConfig
 from grits_lab.sim.foods import FoodSpec, level_count, load_foods, sample_particles
 from grits_lab.sim.spill_metrics import COVERAGE_THRESHOLD, SpillTracker, above_spoon_rim, classify, fill_height, spoon_coverage
-from grits_lab.sim.robot import REST_POSE, PandaKinematics, joint_speed_ratio, pose_to_matrix, slowed_steps, spoon_in_hand
+from grits_lab.sim.robot import COARSE_IK, FINE_IK, REST_POSE, PandaKinematics, joint_speed_ratio, pose_to_matrix, slowed_steps, spoon_in_hand
 from grits_lab.sim.shapes import TARGET_BOWL, BowlGeometry, SpoonGeometry
 from grits_lab.sim.world import TABLE_TOP, World, build_static_scene, build_world, settle
 
@@ -207,6 +207,7 @@ class ScoopEnv:
         self.arm_contact_steps = 0
         self.carry_peak_spoon_accel = 0.0
         self._spoon_velocity: np.ndarray | None = None
+        self._solver_ramp: list[int] = []  # iterations of the next physics steps (`set_solver_iterations`)
         self.rest_pull = True
         counts = self._classify()
         self._refuse_unsettled(counts.outside_source)
@@ -249,11 +250,12 @@ class ScoopEnv:
         if p.ndim != 2 or p.shape[1] != 9 or not 1 <= len(p) <= self.config.substeps or not np.all(np.isfinite(p)):
             raise InputError(f"poses must be finite, (n, 9) with 1 <= n <= {self.config.substeps}; got shape {p.shape}")
         poses = [pose9_to_matrix(x) for x in p]
-        return self._move(world, poses[-1], poses)
+        return self._move(world, poses[-1], poses, converged=FINE_IK)
 
-    def _move(self, world: World, target: np.ndarray, poses: list[np.ndarray]
+    def _move(self, world: World, target: np.ndarray, poses: list[np.ndarray], converged: tuple[float, float] = COARSE_IK
               ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        """One action to the (4, 4) spoon pose `target` through the IK pieces `poses` (`step`)."""
+        """One action to the (4, 4) spoon pose `target` through the IK pieces `poses` (`step`),
+        each solved to the residual `converged` (`PandaKinematics.solve`)."""
         start = self._pose_target
         cfg = self.config
         if cfg.freeze_distance is not None and len(world.particles):
@@ -263,7 +265,7 @@ class ScoopEnv:
         joints_before = self._joint_target.copy()
         failed = False
         done = executed = 0
-        for k, joints, reached in self._track(poses, self._joint_target):
+        for k, joints, reached in self._track(poses, self._joint_target, converged=converged):
             failed |= not reached
             n = (steps * (k + 1)) // pieces - done
             done += n
@@ -304,14 +306,13 @@ class ScoopEnv:
             self._physics_step(world)
 
     def _physics_step(self, world: World) -> None:
-        """One physics step; in the lift and carry, the spoon's acceleration from its velocity
-        change over the step goes into `carry_peak_spoon_accel` (m/s^2)."""
+        """One physics step; in the lift and carry (from the step that leaves the scoop), the spoon's
+        acceleration from its velocity change over the step goes into `carry_peak_spoon_accel` (m/s^2)."""
+        if self._solver_ramp:
+            world.client.setPhysicsEngineParameter(numSolverIterations=self._solver_ramp.pop(0))
         world.step(1)
-        if self.tracker.stage not in ("lift", "carry"):
-            self._spoon_velocity = None
-            return
         v = np.asarray(world.client.getBaseVelocity(world.spoon)[0], dtype=np.float64)
-        if self._spoon_velocity is not None:
+        if self.tracker.stage in ("lift", "carry") and self._spoon_velocity is not None:
             accel = float(np.linalg.norm(v - self._spoon_velocity)) / self.config.time_step
             self.carry_peak_spoon_accel = max(self.carry_peak_spoon_accel, accel)
         self._spoon_velocity = v
@@ -340,30 +341,38 @@ class ScoopEnv:
         self._require_world()
         self._pose_target = self.kinematics.forward(self._joint_target) @ np.linalg.inv(self._hand_in_spoon)
 
-    def set_solver_iterations(self, iterations: int | None) -> None:
+    def set_solver_iterations(self, iterations: int | None, ramp_steps: int = 0) -> None:
         """Constraint-solver iterations per physics step from now on (PyBullet's
         numSolverIterations); None: `SimConfig.solver_iterations`. Every reset starts again at
         the config's. The stages after the scoop raise it (`TransferSettings.solver_iterations`).
-        InputError outside [1, MAX_SOLVER_ITERATIONS]; RuntimeError before `reset`."""
+        ramp_steps: reach it in equal steps over the next `ramp_steps` physics steps instead of at
+        once. The loaded spoon hangs from the arm's motors through a constraint chain that 30
+        iterations leave slack and 100 pull tight: switched in one step the spoon jolts (3.7 m/s^2,
+        then a 1.3 cm/s swing; rule-based, fudge, high, trial 0), ramped over one action it does
+        not (0.5 m/s^2). InputError outside [1, MAX_SOLVER_ITERATIONS]; RuntimeError before `reset`."""
         world = self._require_world()
         n = self.config.solver_iterations if iterations is None else int(iterations)
         if not 1 <= n <= MAX_SOLVER_ITERATIONS:
             raise InputError(f"solver iterations must be in [1, {MAX_SOLVER_ITERATIONS}], got {n}")
-        world.client.setPhysicsEngineParameter(numSolverIterations=n)
+        now = int(world.client.getPhysicsEngineParameters()["numSolverIterations"])
+        self._solver_ramp = [int(round(now + (n - now) * (k + 1) / ramp_steps)) for k in range(ramp_steps)] if ramp_steps > 0 else []
+        if not self._solver_ramp:
+            world.client.setPhysicsEngineParameter(numSolverIterations=n)
 
-    def _track(self, poses: list[np.ndarray], joints: np.ndarray,
-               rest_pull: bool | None = None) -> Iterator[tuple[int, np.ndarray, bool]]:
+    def _track(self, poses: list[np.ndarray], joints: np.ndarray, rest_pull: bool | None = None,
+               converged: tuple[float, float] = COARSE_IK) -> Iterator[tuple[int, np.ndarray, bool]]:
         """The joint targets of one action: for each of its pieces, the (4, 4) spoon poses `poses`,
         (piece index, joint target (7,), whether IK reached the piece). An unreachable piece keeps
         the last reachable joint target. rest_pull: the IK's null-space pull towards the rest
         posture (`PandaKinematics.solve`); None: as `set_stage` set it, on in the scoop (the
-        policies' and demonstrations' arm) and off in the scripted stages after it."""
+        policies' and demonstrations' arm) and off in the scripted stages after it. converged: the
+        IK's stopping residual (`PandaKinematics.solve`)."""
         cfg = self.config
         if rest_pull is None:
             rest_pull = self.rest_pull
         for k, pose in enumerate(poses):
             ik = self.kinematics.solve(pose @ self._hand_in_spoon, joints, cfg.ik_position_tolerance, cfg.ik_orientation_tolerance,
-                                       rest_pull=rest_pull)
+                                       rest_pull=rest_pull, converged=converged)
             if ik.ok:
                 joints = ik.joints
             yield k, joints, ik.ok
@@ -520,7 +529,8 @@ class ScoopEnv:
                           w.source_geometry, w.target_geometry, w.spoon_geometry)
         outside = counts.outside_source & ~counts.in_target
         if (outside & ~counts.in_spoon & ~self.tracker.spilled_flags).any():
-            counts.carried = w.carried_by_spoon(through=outside | counts.in_spoon)
+            # chains run through every grain not lying in a bowl (the source's counts below its rim)
+            counts.carried = w.carried_by_spoon(through=counts.in_spoon | ~(counts.in_source | counts.in_target))
         return counts
 
     def _obs(self) -> dict[str, np.ndarray]:

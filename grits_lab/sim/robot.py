@@ -30,6 +30,11 @@ LAST_LINK_ON_TABLE = 1
 # The Panda's joint velocity limits, rad/s (Franka Control Interface documentation, "Robot and
 # interface specifications", limits in joint space: q_dot_max).
 PANDA_MAX_JOINT_VELOCITY = (2.1750, 2.1750, 2.1750, 2.1750, 2.6100, 2.6100, 2.6100)
+# IK residuals (m, rad) at which a solve stops refining. COARSE_IK: one solve per 25 ms piece
+# (the scoop's actions). FINE_IK: one solve per physics step (`ScoopEnv.step_along`), where a
+# residual of 0.1 mm between consecutive targets is 1.4 m/s^2 of jitter at 120 Hz.
+COARSE_IK = (1e-4, 1e-3)
+FINE_IK = (1e-6, 1e-5)
 # A comfortable configuration with the hand pointing forward and down: the IK null-space target.
 REST_POSE = (0.0, 0.2, 0.0, -2.0, 0.0, 2.6, 0.785)
 
@@ -121,8 +126,11 @@ class PandaKinematics:
         state = self.client.getLinkState(self.robot, GRASP_LINK, computeForwardKinematics=True)
         return pose_to_matrix(np.array(state[4]), np.array(state[5]))
 
-    def solve(self, target: np.ndarray, seed_joints: np.ndarray, pos_tol: float, rot_tol: float, rest_pull: bool = True) -> IKResult:
+    def solve(self, target: np.ndarray, seed_joints: np.ndarray, pos_tol: float, rot_tol: float, rest_pull: bool = True,
+              converged: tuple[float, float] = COARSE_IK) -> IKResult:
         """IK for a (4, 4) grasp-frame target, starting from `seed_joints`; checks the residual by FK.
+
+        converged: (m, rad) residual at which the solve stops refining (`COARSE_IK`, `FINE_IK`).
 
         rest_pull: the first solve pulls the arm towards REST_POSE in the null space (a natural elbow);
         False: every solve only refines from `seed_joints`, so the arm follows a path with the least
@@ -132,7 +140,7 @@ class PandaKinematics:
         position, quat = matrix_to_pose(target)
         self.set_joints(seed_joints)
         best = None
-        for attempt in range(4):
+        for attempt in range(4 if converged == COARSE_IK else 8):
             # The first solve pulls towards the rest pose (null space) to keep a natural elbow;
             # later ones refine from the previous solution without it, which reaches poses the
             # null-space pull would stop short of.
@@ -147,7 +155,7 @@ class PandaKinematics:
             rerr = float(math.acos(np.clip((np.trace(rdiff) - 1) / 2, -1.0, 1.0)))
             if best is None or perr + 0.05 * rerr < best.position_error + 0.05 * best.orientation_error:
                 best = IKResult(joints, perr, rerr, perr <= pos_tol and rerr <= rot_tol)
-            if perr < 1e-4 and rerr < 1e-3:
+            if perr < converged[0] and rerr < converged[1]:
                 break
         assert best is not None
         return best

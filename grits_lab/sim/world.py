@@ -80,14 +80,16 @@ class World:
     def carried_by_spoon(self, through: np.ndarray) -> np.ndarray:
         """(N,) particles the spoon holds through a chain of contacts: touching it, or touching a
         particle it holds, in the contacts of the last physics step. Chains run only through the
-        particles `through` (N,) bool (those not resting in a bowl), so a spoon in the source
-        bowl does not hold the whole pile. A grain on the heap's overhang, outside the spoon's
+        particles `through` (N,) bool (those not lying in a bowl), so a spoon in the source bowl
+        does not hold the whole pile. Contacts within Bullet's margin but apart do not count. A grain on the heap's overhang, outside the spoon's
         volume, is held; one falling or lying on the table is not."""
         index = {int(b): i for i, b in enumerate(self.particles)}
         held = np.zeros(len(self.particles), dtype=bool)
         frontier = [int(self.spoon)]
         while frontier:
             for contact in self.client.getContactPoints(bodyA=frontier.pop()):
+                if contact[8] > CONTACT_GAP:  # within the contact margin but apart: not touching
+                    continue
                 i = index.get(int(contact[2]))
                 if i is not None and through[i] and not held[i]:
                     held[i] = True
@@ -147,6 +149,8 @@ class World:
             pass
 
 
+# Contact distance (m) above which Bullet reports two bodies within its contact margin but apart.
+CONTACT_GAP = 1e-4
 MAX_SHAPES_PER_LINK = 16  # PyBullet silently drops compound children beyond 16
 
 

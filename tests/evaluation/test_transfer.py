@@ -282,19 +282,24 @@ def test_the_stages_after_the_scoop_run_at_the_transfers_solver_iterations(env, 
     settings = _rolled(TransferSettings, alternative_level_steps=[], alternative_level_yaw_deg=[], alternative_pour_heights=[],
                        alternative_pour_offsets=[], solver_iterations=iterations)
     seen = []
-    original = env.step
+    original, along = env.step, env.step_along
 
     def step(action):  # the setting every action of the transfer runs under, read as it starts
         seen.append(env.world.client.getPhysicsEngineParameters()["numSolverIterations"])
         return original(action)
 
-    env.step = step
+    def step_along(poses):
+        seen.append(env.world.client.getPhysicsEngineParameters()["numSolverIterations"])
+        return along(poses)
+
+    env.step, env.step_along = step, step_along
     try:
         run_transfer(env, scene, settings)
     finally:
-        del env.step
+        del env.step, env.step_along
     expected = env.config.solver_iterations if iterations is None else iterations
-    assert seen and set(seen) == {expected}
+    # The first action ramps up from the scoop's (`set_solver_iterations(..., ramp_steps)`); every later one runs at it.
+    assert seen[0] == env.config.solver_iterations and len(seen) > 1 and set(seen[1:]) == {expected}
 
 
 def test_transfer_solver_iterations_outside_their_range_are_a_config_error():

@@ -55,6 +55,11 @@ def test_runs_on_other_seeds_are_refused(tmp_path, capsys):
     other.to_parquet(tmp_path / "other" / "episodes.parquet")
     assert main(["compare-runs", str(tmp_path / "before"), str(tmp_path / "other")]) != 0
     assert "different seeds" in capsys.readouterr().err
+    twice = pd.read_parquet(tmp_path / "before" / "episodes.parquet")
+    (tmp_path / "twice").mkdir()
+    pd.concat([twice, twice.assign(rho=1.0, s=10)]).to_parquet(tmp_path / "twice" / "episodes.parquet")
+    assert main(["compare-runs", str(tmp_path / "before"), str(tmp_path / "twice")]) != 0
+    assert "2 records share their episode" in capsys.readouterr().err
     before = normalize_records(pd.read_parquet(tmp_path / "before" / "episodes.parquet"))
     with pytest.raises(InputError, match="share no episode"):
         paired_episodes(before, before.assign(food="orange"))
