@@ -237,8 +237,12 @@ class ScoopEnv:
         if a.shape != (9,) or not np.all(np.isfinite(a)):
             raise InputError(f"action must be a finite 9-vector (xyz + 6-D rotation), got shape {a.shape}")
         target = pose9_to_matrix(a)
-        return self._move(world, target, [interpolate_pose(self._pose_target, target, (k + 1) / self.config.ik_per_action)
-                                          for k in range(self.config.ik_per_action)])
+        return self._move(world, target, self._straight_pieces(self._pose_target, target))
+
+    def _straight_pieces(self, start: np.ndarray, target: np.ndarray) -> list[np.ndarray]:
+        """The `SimConfig.ik_per_action` (4, 4) poses that cut the straight pose path from `start` to `target`."""
+        n = self.config.ik_per_action
+        return [interpolate_pose(start, target, (k + 1) / n) for k in range(n)]
 
     def step_along(self, poses: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         """`step` to the last of the 9-D poses `poses` (n, 9) through the others: one IK piece per
@@ -311,10 +315,11 @@ class ScoopEnv:
         if self._solver_ramp:
             world.client.setPhysicsEngineParameter(numSolverIterations=self._solver_ramp.pop(0))
         world.step(1)
+        if self._spoon_velocity is None:  # outside the lift and carry (`set_stage`)
+            return
         v = np.asarray(world.client.getBaseVelocity(world.spoon)[0], dtype=np.float64)
-        if self.tracker.stage in ("lift", "carry") and self._spoon_velocity is not None:
-            accel = float(np.linalg.norm(v - self._spoon_velocity)) / self.config.time_step
-            self.carry_peak_spoon_accel = max(self.carry_peak_spoon_accel, accel)
+        accel = float(np.linalg.norm(v - self._spoon_velocity)) / self.config.time_step
+        self.carry_peak_spoon_accel = max(self.carry_peak_spoon_accel, accel)
         self._spoon_velocity = v
 
     def set_stage(self, stage: str, rest_pull: bool | None = None) -> None:
@@ -322,8 +327,11 @@ class ScoopEnv:
         particle spilled from then on is attributed to it (`metrics()["spill_attribution"]`). A reset
         starts in "scoop". rest_pull: whether the IK pulls the arm towards its rest posture from now
         on (`PandaKinematics.solve`); None: only in the scoop. ValueError for another stage name."""
-        self._require_world()
+        world = self._require_world()
         self.tracker.set_stage(stage)
+        # The lift and carry measure the spoon's acceleration (`_physics_step`) from its velocity now.
+        self._spoon_velocity = (np.asarray(world.client.getBaseVelocity(world.spoon)[0], dtype=np.float64)
+                                if stage in ("lift", "carry") else None)
         self.rest_pull = stage == "scoop" if rest_pull is None else bool(rest_pull)
 
     @property
@@ -392,8 +400,7 @@ class ScoopEnv:
         for action in np.asarray(path, dtype=np.float64).reshape(-1, 9):
             target = pose9_to_matrix(action)
             before, failed = joints, False
-            pieces = [interpolate_pose(start, target, (k + 1) / self.config.ik_per_action) for k in range(self.config.ik_per_action)]
-            for _, joints, reached in self._track(pieces, joints, rest_pull):
+            for _, joints, reached in self._track(self._straight_pieces(start, target), joints, rest_pull):
                 failed |= not reached
             start = target
             unreachable.append(failed)
