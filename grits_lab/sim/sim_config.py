@@ -98,6 +98,11 @@ class SimConfig:
     spoon_mass: float = 0.05
     max_episode_steps: int = 400
     foods_file: str | None = None  # None: the packaged grits_lab/sim/foods.yaml
+    # The food's state before the scoop. None: a level fill (every protocol). An azimuth (degrees
+    # from the world's +x axis, about the source bowl's axis): the food is packed into that half of
+    # the bowl only and settles as a pile heaped against that wall, a state no demonstration shows
+    # (`world.pack_in_bowl`).
+    heap_azimuth_deg: float | None = None
     cameras: list[CameraConfig] = field(default_factory=_default_cameras)
 
     def __post_init__(self) -> None:
@@ -113,6 +118,8 @@ class SimConfig:
         require(0 < self.settle_min_s <= self.settle_max_s, "settle_min_s", self.settle_min_s, "in (0, settle_max_s]")
         require(self.settle_speed > 0, "settle_speed", self.settle_speed, "positive")
         require(self.spoon_mass > 0, "spoon_mass", self.spoon_mass, "positive")
+        require(self.heap_azimuth_deg is None or -360.0 <= self.heap_azimuth_deg <= 360.0, "heap_azimuth_deg",
+                self.heap_azimuth_deg, "degrees in [-360, 360], or null for a level fill")
         require(self.max_episode_steps >= 1, "max_episode_steps", self.max_episode_steps, ">= 1")
         require(all(s > 0 for s in self.target_workspace_size), "target_workspace_size", self.target_workspace_size, "positive")
         require(len({c.name for c in self.cameras}) == len(self.cameras), "cameras", [c.name for c in self.cameras], "uniquely named")

@@ -214,11 +214,15 @@ def _pack_extent(p: SampledParticles) -> tuple[float, float]:
     return math.hypot(p.radius, p.half_length), p.radius
 
 
-def pack_in_bowl(components: list[SampledParticles], bowl: BowlGeometry, centre: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def pack_in_bowl(components: list[SampledParticles], bowl: BowlGeometry, centre: np.ndarray, rng: np.random.Generator,
+                 heap_azimuth_deg: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Initial particle centres in layers inside the bowl (world frame) and each slot's component index.
 
     Slots sit on a jittered square grid, every slot at least one particle clear of the wall, so
     particles start without overlaps and only drop a few millimetres while settling.
+    `heap_azimuth_deg` (None: a level fill): only the half of each layer on that side of the bowl's
+    axis (world-frame azimuth, degrees from +x) is filled, so the same food stands about twice as
+    high against one wall and slumps towards the other while settling (`SimConfig.heap_azimuth_deg`).
     """
     if not components:
         return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
@@ -226,6 +230,7 @@ def pack_in_bowl(components: list[SampledParticles], bowl: BowlGeometry, centre:
     h = max(e[0] for e in extents) * 1.08
     v = max(e[1] for e in extents) * 1.08
     total = sum(p.count for p in components)
+    side = None if heap_azimuth_deg is None else np.array([math.cos(math.radians(heap_azimuth_deg)), math.sin(math.radians(heap_azimuth_deg))])
     slots: list[np.ndarray] = []
     z = bowl.floor_thickness + v + 0.0005
     layer = 0
@@ -236,7 +241,7 @@ def pack_in_bowl(components: list[SampledParticles], bowl: BowlGeometry, centre:
         offset = rng.uniform(-0.5, 0.5, size=2) * h
         n = int(math.ceil(r_avail / (2 * h))) + 1
         grid = [np.array([i * 2 * h, j * 2 * h]) + offset for i in range(-n, n + 1) for j in range(-n, n + 1)]
-        ring = [g for g in grid if np.linalg.norm(g) <= r_avail]
+        ring = [g for g in grid if np.linalg.norm(g) <= r_avail and (side is None or float(g @ side) >= 0.0)]
         rng.shuffle(ring)
         for g in ring:
             if len(slots) == total:
@@ -315,7 +320,7 @@ def build_world(config: SimConfig, components: list[SampledParticles], rng: np.r
         client.setCollisionFilterPair(robot, table, link, -1, 0 if link <= LAST_LINK_ON_TABLE else 1)
 
     ids, comp_of, masses = [], [], []
-    positions, comp_index = pack_in_bowl(components, source_geometry, src_pos, rng)
+    positions, comp_index = pack_in_bowl(components, source_geometry, src_pos, rng, config.heap_azimuth_deg)
     for ci, p in enumerate(components):
         mask = comp_index == ci
         col, vis = _particle_shapes(client, p)
