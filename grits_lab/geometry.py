@@ -7,6 +7,8 @@ Euler angles, which is why diffusion policies regress it.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -87,6 +89,17 @@ def pose9_to_pose7(pose9: np.ndarray) -> np.ndarray:
     """(..., 9) xyz + 6-D rotation -> (..., 7) xyz + quaternion xyzw."""
     p = np.asarray(pose9, dtype=np.float64)
     return np.concatenate([p[..., :3], rot6d_to_quat(p[..., 3:9])], axis=-1)
+
+
+def rotation_vector(matrix: np.ndarray) -> np.ndarray:
+    """(3,) axis-angle vector (unit axis times the angle in [0, pi], radians) of a (3, 3) rotation:
+    the inverse of `axis_angle_matrix`, through the quaternion, so it stays exact near 0 and pi."""
+    x, y, z, w = matrix_to_quat(np.asarray(matrix, dtype=np.float64))
+    v = np.array([x, y, z]) * (1.0 if w >= 0 else -1.0)
+    s = float(np.linalg.norm(v))
+    if s < 1e-12:
+        return np.zeros(3)
+    return v / s * 2.0 * math.atan2(s, abs(w))
 
 
 def axis_angle_matrix(axis: np.ndarray, angles: np.ndarray | float) -> np.ndarray:

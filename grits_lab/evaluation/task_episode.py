@@ -234,7 +234,8 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     max_step = settings.max_speed / env.config.control_hz
     # The robot's base stands at the world origin (grits_lab/sim/world.py): radial = away from it.
     heading = math.atan2(target.centre[1], target.centre[0]) if settings.heading == "radial" else None
-    check = ((lambda actions: env.check_path(actions, rest_pull=settings.rest_pull, touches=settings.avoid_arm_contact))
+    check = ((lambda actions: env.check_path(actions, rest_pull=settings.rest_pull, touches=settings.avoid_arm_contact,
+                                             ik_refine=settings.ik_refine, stop_at_unreachable=settings.no_option == "hold"))
              if settings.reach_check else None)
     plan = choose_transfer(current, target, obstacles, settings, max_step, reach, heading, check,
                            spoon.pour_edge(settings.pour_axis))
@@ -245,7 +246,7 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
         nonlocal ik_failures
         if env.tracker.stage != stage:
             spilled_by_stage[env.tracker.stage] = int(env.metrics()["spilled"])
-            env.set_stage(stage, rest_pull=settings.rest_pull)
+            env.set_stage(stage, rest_pull=settings.rest_pull, ik_refine=settings.ik_refine)
         info = (env.step(action) if via is None else env.step_along(via))[4]
         ik_failures += int(info["ik_failure"])
         joint_steps.append(float(info["joint_step"]))

@@ -209,6 +209,7 @@ class ScoopEnv:
         self._spoon_velocity: np.ndarray | None = None
         self._solver_ramp: list[int] = []  # iterations of the next physics steps (`set_solver_iterations`)
         self.rest_pull = True
+        self.ik_refine = False
         counts = self._classify()
         self._refuse_unsettled(counts.outside_source)
         self.tracker.observe(counts)
@@ -322,17 +323,20 @@ class ScoopEnv:
         self.carry_peak_spoon_accel = max(self.carry_peak_spoon_accel, accel)
         self._spoon_velocity = v
 
-    def set_stage(self, stage: str, rest_pull: bool | None = None) -> None:
+    def set_stage(self, stage: str, rest_pull: bool | None = None, ik_refine: bool | None = None) -> None:
         """Name the task stage the next actions belong to (scoop, lift, carry, pour, after_pour): every
         particle spilled from then on is attributed to it (`metrics()["spill_attribution"]`). A reset
         starts in "scoop". rest_pull: whether the IK pulls the arm towards its rest posture from now
-        on (`PandaKinematics.solve`); None: only in the scoop. ValueError for another stage name."""
+        on (`PandaKinematics.solve`); None: only in the scoop. ik_refine: whether an IK solve that
+        stops short of its residual is refined by damped least squares from where the arm is
+        (`PandaKinematics.solve`); None: in every stage but the scoop. ValueError for another stage name."""
         world = self._require_world()
         self.tracker.set_stage(stage)
         # The lift and carry measure the spoon's acceleration (`_physics_step`) from its velocity now.
         self._spoon_velocity = (np.asarray(world.client.getBaseVelocity(world.spoon)[0], dtype=np.float64)
                                 if stage in ("lift", "carry") else None)
         self.rest_pull = stage == "scoop" if rest_pull is None else bool(rest_pull)
+        self.ik_refine = stage != "scoop" if ik_refine is None else bool(ik_refine)
 
     @property
     def pose_target(self) -> np.ndarray:
@@ -368,39 +372,54 @@ class ScoopEnv:
             world.client.setPhysicsEngineParameter(numSolverIterations=n)
 
     def _track(self, poses: list[np.ndarray], joints: np.ndarray, rest_pull: bool | None = None,
-               converged: tuple[float, float] = COARSE_IK) -> Iterator[tuple[int, np.ndarray, bool]]:
+               converged: tuple[float, float] = COARSE_IK, ik_refine: bool | None = None) -> Iterator[tuple[int, np.ndarray, bool]]:
         """The joint targets of one action: for each of its pieces, the (4, 4) spoon poses `poses`,
         (piece index, joint target (7,), whether IK reached the piece). An unreachable piece keeps
         the last reachable joint target. rest_pull: the IK's null-space pull towards the rest
         posture (`PandaKinematics.solve`); None: as `set_stage` set it, on in the scoop (the
         policies' and demonstrations' arm) and off in the scripted stages after it. converged: the
-        IK's stopping residual (`PandaKinematics.solve`)."""
+        IK's stopping residual, ik_refine its damped least-squares refinement (`PandaKinematics.solve`;
+        None: as `set_stage` set it)."""
         cfg = self.config
         if rest_pull is None:
             rest_pull = self.rest_pull
+        if ik_refine is None:
+            ik_refine = self.ik_refine
         for k, pose in enumerate(poses):
             ik = self.kinematics.solve(pose @ self._hand_in_spoon, joints, cfg.ik_position_tolerance, cfg.ik_orientation_tolerance,
-                                       rest_pull=rest_pull, converged=converged)
+                                       rest_pull=rest_pull, converged=converged, refine=ik_refine)
             if ik.ok:
                 joints = ik.joints
             yield k, joints, ik.ok
 
-    def check_path(self, path: np.ndarray, rest_pull: bool | None = None, touches: bool = False) -> PathCheck:
+    def check_path(self, path: np.ndarray, rest_pull: bool | None = None, touches: bool = False,
+                   ik_refine: bool | None = None, stop_at_unreachable: bool = False) -> PathCheck:
         """What the arm would do with the actions `path` (T, 9) from its present joint target, on the
         kinematic copy only (the world is not touched): the same IK tracking as `step` (with
-        `rest_pull` as `_track`: None the current stage's; pass False for a motion of the stages
-        after the scoop), so entry t is what `step(path[t])` would report as `ik_failure`,
+        `rest_pull` and `ik_refine` as `_track`: None the current stage's; pass the settings of the
+        stages after the scoop for a motion of theirs), so entry t is what `step(path[t])` would report as `ik_failure`,
         `joint_step` and `joint_speed_ratio`. With `touches`, also whether the arm comes within
-        ARM_CLEARANCE of the table or a bowl (`PathCheck.touches`; None without). Raises
-        RuntimeError before `reset`.
+        ARM_CLEARANCE of the table or a bowl (`PathCheck.touches`; None without). With
+        `stop_at_unreachable`, once an action after the first is unreachable the rest are reported
+        unreachable (joint step 0) without solving them: enough to fail a path, and a path the
+        arm cannot follow no longer costs a full IK refinement (`PandaKinematics.refine`) at every
+        piece after it. Raises RuntimeError before `reset`.
         """
         self._require_world()
         joints, start = self._joint_target.copy(), self._pose_target
         unreachable, steps, ratios, touching = [], [], [], []
-        for action in np.asarray(path, dtype=np.float64).reshape(-1, 9):
+        actions = np.asarray(path, dtype=np.float64).reshape(-1, 9)
+        for i, action in enumerate(actions):
+            if stop_at_unreachable and i > 1 and unreachable[-1]:
+                rest = len(actions) - i
+                unreachable += [True] * rest
+                steps += [0.0] * rest
+                ratios += [0.0] * rest
+                touching += [False] * rest if touches else []
+                break
             target = pose9_to_matrix(action)
             before, failed = joints, False
-            for _, joints, reached in self._track(self._straight_pieces(start, target), joints, rest_pull):
+            for _, joints, reached in self._track(self._straight_pieces(start, target), joints, rest_pull, ik_refine=ik_refine):
                 failed |= not reached
             start = target
             unreachable.append(failed)

@@ -83,6 +83,11 @@ class TransferSettings:
     # min-jerk version), an arm far from its rest posture swings shoulder against upper arm in
     # one action however slowly it moves (measured 0.34 rad in 0.1 s, 1.6x the Panda's limit).
     rest_pull: bool = False
+    # Every IK solve in these stages that PyBullet's solver leaves short of its residual is refined
+    # by damped least squares from where the arm is (`PandaKinematics.refine`), as a robot's
+    # Cartesian controller follows a path. Off (scoop-v9 and earlier): PyBullet's answer alone,
+    # which stalled 1-4 cm into the lift of 9 of the oracle's 144 episodes (docs/evaluation.md).
+    ik_refine: bool = True
     slow_to_limits: bool = True
     # With the reach check: an option whose arm (not the spoon) comes within 5 mm of the table or a
     # bowl on the kinematic copy fails too, as a motion planner's collision check fails it. The

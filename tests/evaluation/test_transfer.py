@@ -151,6 +151,31 @@ def test_an_unreachable_pour_is_replaced_by_one_the_arm_reaches(env):
     assert plan.n_pour % settings.pour_steps == 0  # the roll, slowed as a whole where the arm needed it
 
 
+def test_the_ik_refinement_follows_a_path_pybullets_solver_stalls_on(env):
+    """The roll pour above a target by the robot's base: PyBullet's solver, seeded at the arm,
+    stops short of its poses; refined by damped least squares from the arm (`ik_refine`, scoop-v10)
+    every pose after the first is reached. Stopping at the first unreachable action reports the
+    same first failure and fails every action after it."""
+    import math
+
+    from grits_lab.evaluation.evaluation_config import TransferSettings
+    from grits_lab.evaluation.transfer import choose_transfer
+    from grits_lab.sim.env import matrix_to_pose9
+
+    scene, target, obstacles = _scene_obstacles(env, (0.30, 0.20))
+    settings = _rolled(TransferSettings)
+    heading = math.atan2(target.centre[1], target.centre[0])
+    plan = choose_transfer(matrix_to_pose9(scene.spoon_pose()), target, obstacles, settings, 0.012, 0.036, heading, check=None)
+    plain = env.check_path(plan.actions, rest_pull=False, ik_refine=False)
+    refined = env.check_path(plan.actions, rest_pull=False, ik_refine=True)
+    assert plain.unreachable[1:].any() and not refined.unreachable[1:].any()
+    assert refined.speed_ratios.max() > 0
+    stopped = env.check_path(plan.actions, rest_pull=False, ik_refine=False, stop_at_unreachable=True)
+    first = 1 + int(np.argmax(plain.unreachable[1:]))
+    assert np.array_equal(stopped.unreachable[:first + 1], plain.unreachable[:first + 1])
+    assert stopped.unreachable[first:].all() and len(stopped.unreachable) == len(plan.actions)
+
+
 def _fake_check(ratio_of):
     """A PathCheck stand-in: speed ratio of each action from `ratio_of(actions)`, nothing unreachable."""
     from types import SimpleNamespace
@@ -256,12 +281,13 @@ def test_the_pour_puts_the_lip_the_food_leaves_by_over_the_targets_centre():
 
 
 def test_when_no_option_passes_the_arm_holds_the_spoon_instead_of_running_a_motion_it_cannot_follow(env):
-    """A target by the robot's base with no alternative to fall back on: the one option fails the
-    check, and with `no_option: hold` the arm does not move (scoop-v3 ran it anyway and jumped)."""
+    """A target beyond the arm's reach (1 m from its base; the Panda reaches 0.855 m) with no
+    alternative to fall back on: the one option fails the check, and with `no_option: hold` the arm
+    does not move (scoop-v3 ran it anyway and jumped)."""
     from grits_lab.evaluation.evaluation_config import TransferSettings
     from grits_lab.evaluation.task_episode import run_transfer
 
-    scene, _, _ = _scene_obstacles(env, (0.30, 0.20))
+    scene, _, _ = _scene_obstacles(env, (0.85, 0.52))
     settings = _rolled(TransferSettings, alternative_level_steps=[], alternative_level_yaw_deg=[], alternative_pour_heights=[],
                        alternative_pour_offsets=[])
     before = env.spoon_pose()

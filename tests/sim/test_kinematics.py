@@ -1,0 +1,67 @@
+"""The Panda's kinematic copy: its Jacobian, the damped least-squares refinement and what `solve`
+does with it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from grits_lab.geometry import axis_angle_matrix, rotation_vector
+from grits_lab.sim.robot import FINE_IK, REST_POSE, PandaKinematics
+
+
+@pytest.fixture(scope="module")
+def kin():
+    k = PandaKinematics()
+    yield k
+    k.close()
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-7, 0.4, 2.5, np.pi - 1e-6])
+def test_rotation_vector_inverts_axis_angle_matrix(angle):
+    axis = np.array([0.3, -0.8, 0.5]) / np.linalg.norm([0.3, -0.8, 0.5])
+    assert np.allclose(rotation_vector(axis_angle_matrix(axis, angle)), axis * angle, atol=1e-9)
+
+
+def test_the_jacobian_is_the_derivative_of_forward_kinematics(kin):
+    q = np.array(REST_POSE) + np.array([0.1, -0.2, 0.3, 0.2, -0.1, 0.1, 0.2])
+    jac, h = kin.jacobian(q), 1e-3  # PyBullet's link states are single precision: central differences
+    for j in range(7):
+        dq = np.zeros(7)
+        dq[j] = h
+        ahead, behind = kin.forward(q + dq), kin.forward(q - dq)
+        assert np.allclose((ahead[:3, 3] - behind[:3, 3]) / (2 * h), jac[:3, j], atol=2e-3)
+        assert np.allclose(rotation_vector(ahead[:3, :3] @ behind[:3, :3].T) / (2 * h), jac[3:, j], atol=2e-3)
+
+
+def test_refine_reaches_a_pose_near_the_seed_by_a_small_joint_motion(kin):
+    q0 = np.array(REST_POSE)
+    goal = np.array(REST_POSE) + np.array([0.05, -0.04, 0.03, 0.06, -0.05, 0.04, 0.03])
+    target = kin.forward(goal)
+    q = kin.refine(target, q0, FINE_IK)
+    e = kin.residual(target, q)
+    assert np.linalg.norm(e[:3]) < FINE_IK[0] and np.linalg.norm(e[3:]) < FINE_IK[1]
+    # each step is least-norm: the path ends no farther from the seed than the joints that made the target
+    assert np.linalg.norm(q - q0) <= 1.01 * np.linalg.norm(goal - q0)
+
+
+def test_refine_keeps_every_joint_inside_its_limits_for_a_pose_out_of_reach(kin):
+    target = kin.forward(np.array(REST_POSE))
+    target[:3, 3] = [1.6, 0.0, 0.4]  # twice the Panda's reach
+    q = kin.refine(target, np.array(REST_POSE), FINE_IK, iterations=60)
+    assert np.all(q >= np.array(kin.lower[:7]) - 1e-12) and np.all(q <= np.array(kin.upper[:7]) + 1e-12)
+    result = kin.solve(target, np.array(REST_POSE), 0.01, 0.15, rest_pull=False, converged=FINE_IK, refine=True)
+    assert not result.ok
+
+
+def test_solve_with_refine_is_never_farther_from_the_pose_than_without(kin):
+    rng = np.random.default_rng(0)
+    lower, upper = np.array(kin.lower[:7]), np.array(kin.upper[:7])
+    for _ in range(5):
+        seed = np.clip(np.array(REST_POSE) + rng.normal(0, 0.3, 7), lower, upper)
+        target = kin.forward(np.clip(seed + rng.normal(0, 0.05, 7), lower, upper))
+        plain = kin.solve(target, seed, 0.01, 0.15, rest_pull=False, converged=FINE_IK)
+        refined = kin.solve(target, seed, 0.01, 0.15, rest_pull=False, converged=FINE_IK, refine=True)
+        score = lambda r: r.position_error + 0.05 * r.orientation_error  # noqa: E731
+        assert score(refined) <= score(plain) + 1e-12
+        assert refined.ok
