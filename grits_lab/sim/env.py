@@ -24,7 +24,7 @@ from grits_lab.sim.cameras import CameraImage, render
 from grits_lab.sim.sim_config import MAX_SOLVER_ITERATIONS, SimConfig
 from grits_lab.sim.foods import FoodSpec, level_count, load_foods, sample_particles
 from grits_lab.sim.spill_metrics import COVERAGE_THRESHOLD, SpillTracker, above_spoon_rim, classify, fill_height, spoon_coverage
-from grits_lab.sim.robot import COARSE_IK, FINE_IK, REST_POSE, PandaKinematics, joint_speed_ratio, pose_to_matrix, slowed_steps, spoon_in_hand
+from grits_lab.sim.robot import COARSE_IK, FINE_IK, REST_POSE, IKConvergence, PandaKinematics, joint_speed_ratio, pose_to_matrix, slowed_steps, spoon_in_hand
 from grits_lab.sim.shapes import TARGET_BOWL, BowlGeometry, SpoonGeometry
 from grits_lab.sim.world import TABLE_TOP, World, build_static_scene, build_world, settle
 
@@ -257,7 +257,7 @@ class ScoopEnv:
         poses = [pose9_to_matrix(x) for x in p]
         return self._move(world, poses[-1], poses, converged=FINE_IK)
 
-    def _move(self, world: World, target: np.ndarray, poses: list[np.ndarray], converged: tuple[float, float] = COARSE_IK
+    def _move(self, world: World, target: np.ndarray, poses: list[np.ndarray], converged: IKConvergence = COARSE_IK
               ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         """One action to the (4, 4) spoon pose `target` through the IK pieces `poses` (`step`),
         each solved to the residual `converged` (`PandaKinematics.solve`)."""
@@ -372,7 +372,7 @@ class ScoopEnv:
             world.client.setPhysicsEngineParameter(numSolverIterations=n)
 
     def _track(self, poses: list[np.ndarray], joints: np.ndarray, rest_pull: bool | None = None,
-               converged: tuple[float, float] = COARSE_IK, ik_refine: bool | None = None) -> Iterator[tuple[int, np.ndarray, bool]]:
+               converged: IKConvergence = COARSE_IK, ik_refine: bool | None = None) -> Iterator[tuple[int, np.ndarray, bool]]:
         """The joint targets of one action: for each of its pieces, the (4, 4) spoon poses `poses`,
         (piece index, joint target (7,), whether IK reached the piece). An unreachable piece keeps
         the last reachable joint target. rest_pull: the IK's null-space pull towards the rest

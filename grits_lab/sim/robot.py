@@ -30,11 +30,6 @@ LAST_LINK_ON_TABLE = 1
 # The Panda's joint velocity limits, rad/s (Franka Control Interface documentation, "Robot and
 # interface specifications", limits in joint space: q_dot_max).
 PANDA_MAX_JOINT_VELOCITY = (2.1750, 2.1750, 2.1750, 2.1750, 2.6100, 2.6100, 2.6100)
-# IK residuals (m, rad) at which a solve stops refining. COARSE_IK: one solve per 25 ms piece
-# (the scoop's actions). FINE_IK: one solve per physics step (`ScoopEnv.step_along`), where a
-# residual of 0.1 mm between consecutive targets is 1.4 m/s^2 of jitter at 120 Hz.
-COARSE_IK = (1e-4, 1e-3)
-FINE_IK = (1e-6, 1e-5)
 # Damped least squares (`PandaKinematics.refine`): damping (the smallest singular value of J it
 # still inverts as if full, about), the most one iteration moves a joint (rad), iterations at most.
 DLS_DAMPING = 0.02
@@ -86,6 +81,26 @@ class IKResult:
     position_error: float
     orientation_error: float
     ok: bool
+
+
+@dataclass(frozen=True)
+class IKConvergence:
+    """When an IK solve stops refining: the residual below `position` (m) and `orientation` (rad),
+    or after `attempts` calls of PyBullet's solver, each refining the last answer."""
+
+    position: float
+    orientation: float
+    attempts: int
+
+    def reached(self, position_error: float, orientation_error: float) -> bool:
+        return position_error < self.position and orientation_error < self.orientation
+
+
+# COARSE_IK: one solve per 25 ms piece (the scoop's actions). FINE_IK: one solve per physics step
+# (`ScoopEnv.step_along`), where a residual of 0.1 mm between consecutive targets is 1.4 m/s^2 of
+# jitter at 120 Hz.
+COARSE_IK = IKConvergence(1e-4, 1e-3, attempts=4)
+FINE_IK = IKConvergence(1e-6, 1e-5, attempts=8)
 
 
 class PandaKinematics:
@@ -144,20 +159,21 @@ class PandaKinematics:
         reached = self.forward(joints)
         return np.concatenate([target[:3, 3] - reached[:3, 3], rotation_vector(target[:3, :3] @ reached[:3, :3].T)])
 
-    def refine(self, target: np.ndarray, seed_joints: np.ndarray, converged: tuple[float, float] = FINE_IK,
+    def refine(self, target: np.ndarray, seed_joints: np.ndarray, converged: IKConvergence = FINE_IK,
                iterations: int = DLS_ITERATIONS) -> np.ndarray:
         """Joints (7,) from `seed_joints` towards a (4, 4) grasp-frame target by damped least squares
-        (dq = J^T (J J^T + DLS_DAMPING^2 I)^-1 e; Wampler 1986, Buss 2004), every iterate clipped to the
-        joint limits and no joint moved more than DLS_MAX_STEP rad per iteration, until the residual is
-        below `converged` (m, rad) or after `iterations` (no earlier stop: on a lift the scoop-v9
+        (dq = J^T (J J^T + DLS_DAMPING^2 I)^-1 e; Wampler 1986, Buss 2004), every iterate clipped to
+        the joint limits and no joint moved more than DLS_MAX_STEP rad per iteration, until the
+        residual is within `converged` or after `iterations`. No earlier stop: on a lift the scoop-v9
         oracle held, the residual shrank by less than 0.1 % an iteration for 30 iterations in a row
-        before it converged; stopping there left the lift unreachable). It follows the pose from where the arm is
-        and never jumps to another posture: the least joint motion that reaches the pose."""
+        before it converged, and stopping there left the lift unreachable. Every step is the least
+        joint motion towards the pose, so the arm follows it from where it is and never jumps to
+        another posture."""
         lower, upper = np.asarray(self.lower[:7]), np.asarray(self.upper[:7])
         q = np.clip(np.asarray(seed_joints, dtype=np.float64)[:7], lower, upper)
         for _ in range(iterations):
             e = self.residual(target, q)
-            if np.linalg.norm(e[:3]) < converged[0] and np.linalg.norm(e[3:]) < converged[1]:
+            if converged.reached(float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))):
                 break
             jac = self.jacobian(q)
             dq = jac.T @ np.linalg.solve(jac @ jac.T + DLS_DAMPING**2 * np.eye(6), e)
@@ -165,10 +181,10 @@ class PandaKinematics:
         return q
 
     def solve(self, target: np.ndarray, seed_joints: np.ndarray, pos_tol: float, rot_tol: float, rest_pull: bool = True,
-              converged: tuple[float, float] = COARSE_IK, refine: bool = False) -> IKResult:
+              converged: IKConvergence = COARSE_IK, refine: bool = False) -> IKResult:
         """IK for a (4, 4) grasp-frame target, starting from `seed_joints`; checks the residual by FK.
 
-        converged: (m, rad) residual at which the solve stops refining (`COARSE_IK`, `FINE_IK`).
+        converged: when the solve stops refining (`IKConvergence`: `COARSE_IK`, `FINE_IK`).
         refine: when PyBullet's solver stops short of `converged`, also `refine` from `seed_joints`
         and keep whichever lands closer. PyBullet's solver, seeded at an arm far from its rest
         posture, can stall centimetres short of a pose the arm reaches by moving on from where it
@@ -183,7 +199,7 @@ class PandaKinematics:
         position, quat = matrix_to_pose(target)
         self.set_joints(seed_joints)
         best = None
-        for attempt in range(4 if converged == COARSE_IK else 8):
+        for attempt in range(converged.attempts):
             # The first solve pulls towards the rest pose (null space) to keep a natural elbow;
             # later ones refine from the previous solution without it, which reaches poses the
             # null-space pull would stop short of.
@@ -198,10 +214,10 @@ class PandaKinematics:
             rerr = float(math.acos(np.clip((np.trace(rdiff) - 1) / 2, -1.0, 1.0)))
             if best is None or perr + 0.05 * rerr < best.position_error + 0.05 * best.orientation_error:
                 best = IKResult(joints, perr, rerr, perr <= pos_tol and rerr <= rot_tol)
-            if perr < converged[0] and rerr < converged[1]:
+            if converged.reached(perr, rerr):
                 break
         assert best is not None
-        if refine and not (best.position_error < converged[0] and best.orientation_error < converged[1]):
+        if refine and not converged.reached(best.position_error, best.orientation_error):
             joints = self.refine(target, seed_joints, converged)
             e = self.residual(target, joints)
             perr, rerr = float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))
