@@ -189,3 +189,12 @@ def test_a_lock_its_holder_left_behind_is_taken_over_with_one_line(tmp_path, cap
     with exclusive_directory(tmp_path, "evaluate"):  # a released lock: taken without a word
         pass
     assert capsys.readouterr().err == ""
+
+
+def test_a_markdown_table_aligns_its_columns_and_refuses_a_ragged_row():
+    from grits_lab.markdown import markdown_table
+
+    table = markdown_table(["Method", "Stage", "n"], [["DP", "carry", "3"]], right=2)
+    assert table.splitlines() == ["| Method | Stage | n |", "|---|---|---:|", "| DP | carry | 3 |"]
+    with pytest.raises(ValueError, match="2 cells, the header 3"):
+        markdown_table(["Method", "Stage", "n"], [["DP", "carry"]])

@@ -17,7 +17,7 @@ ROOT = Path(grits_lab.__file__).parent
 # Lowest first; the foundation modules at the package's root come first.
 LAYERS: list[set[str]] = [
     {"errors"},
-    {"io", "seeding", "geometry", "intervals", "versions"},
+    {"io", "seeding", "geometry", "intervals", "markdown", "versions"},
     {"config", "records"},
     {"runners", "training"},  # generic engines: parallel episodes, the torch training utilities
     {"sim"},

@@ -26,6 +26,7 @@ import pandas as pd
 
 from grits_lab.errors import InputError
 from grits_lab.intervals import format_percent
+from grits_lab.markdown import markdown_table
 from grits_lab.records import OUTCOME_COLUMNS
 from grits_lab.report.run_compare import COMPARISON_FILE, comparison_markdown
 from grits_lab.report.spill_tables import CAUSE_NAMES, STAGE_NAMES
@@ -144,14 +145,6 @@ def _lookup(summary: pd.DataFrame, method: str, outcome: str) -> pd.Series | Non
     return rows.iloc[0] if len(rows) else None
 
 
-def _markdown(header: list[str], rows: list[list[str]], right: int = 1) -> str:
-    """A Markdown table; columns from `right` on are right-aligned."""
-    align = ["---" if i < right else "---:" for i in range(len(header))]
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(align) + "|"]
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
-    return "\n".join(lines)
-
-
 # --- the blocks ---------------------------------------------------------------------------------
 
 def outcomes_block(root: Path, name: str, here: Path) -> str:
@@ -163,7 +156,7 @@ def outcomes_block(root: Path, name: str, here: Path) -> str:
         episodes = _lookup(summary, method, "task_success")
         rows.append([method_name, str(int(episodes["n"])) if episodes is not None else "—",
                      *(_cell(_lookup(summary, method, o)) for o in shown)])
-    table = _markdown(["Method", "Episodes", *(OUTCOME_HEADERS[o] for o in shown)], rows)
+    table = markdown_table(["Method", "Episodes", *(OUTCOME_HEADERS[o] for o in shown)], rows)
     return (f"{table}\n\nRate [Wilson 95 % interval] (k/n). Lifted food delivered: of the episodes that lifted food; "
             f"reach check failed: of the transfers checked. Files: [{SUMMARY_FILE}]({_link(root, name, SUMMARY_FILE, here)}), "
             f"[{PROVENANCE_FILE}]({_link(root, name, PROVENANCE_FILE, here)}).")
@@ -186,7 +179,7 @@ def stages_block(root: Path, name: str, here: Path) -> str:
                            for c in SPILL_CAUSES)])
     if not rows:
         return "No particle was spilled in any episode."
-    table = _markdown(["Method, episodes", "Stage", *(CAUSE_NAMES[c].lower() for c in SPILL_CAUSES)], rows, right=2)
+    table = markdown_table(["Method, episodes", "Stage", *(CAUSE_NAMES[c].lower() for c in SPILL_CAUSES)], rows, right=2)
     return f"{table}\n\nEpisodes (particles) that lost food each way, stages with a loss only. File: [{STAGES_FILE}]({_link(root, name, STAGES_FILE, here)})."
 
 
@@ -223,13 +216,13 @@ def headline_block(root: Path, name: str, here: Path) -> str:
                      *(part for o in OUTCOME_COLUMNS for part in (_cell(_lookup(summary, method, o), interval=False),
                                                                     format_percent(paper.get(o)) if o in paper else "—"))])
     header = ["Method", "Episodes"] + [f"{OUTCOME_HEADERS[o]}, {who}" for o in OUTCOME_COLUMNS for who in ("sim", "paper")]
-    return _markdown(header, rows)
+    return markdown_table(header, rows)
 
 
 def claims_block(root: Path, name: str, here: Path) -> str:
     """The report's claims table (the paper's claims beside these records), as the summary holds it."""
     claims = pd.read_csv(_folder(root, name) / CLAIMS_FILE, keep_default_na=False)
-    return _markdown(list(claims.columns), [list(map(str, row)) for row in claims.itertuples(index=False)], right=99)
+    return markdown_table(list(claims.columns), [list(map(str, row)) for row in claims.itertuples(index=False)], right=99)
 
 
 def comparison_block(root: Path, name: str, here: Path) -> str:
@@ -252,7 +245,7 @@ def index_block(root: Path, name: str | None, here: Path) -> str:
         else:
             protocol, episodes = "—", "no summary yet"
         rows.append([f"[{folder.name}]({link})", title, protocol, episodes])
-    return _markdown(["Experiment", "Question", "Protocol", "Episodes"], rows, right=99)
+    return markdown_table(["Experiment", "Question", "Protocol", "Episodes"], rows, right=99)
 
 
 BLOCKS: dict[str, Callable[[Path, str, Path], str]] = {

@@ -17,6 +17,7 @@ import pandas as pd
 
 from grits_lab.errors import InputError
 from grits_lab.io import write_text_atomic
+from grits_lab.markdown import markdown_table
 from grits_lab.report.run_records import load_run
 from grits_lab.report.spill_tables import has_attribution, spilled_after_scoop
 from grits_lab.report.vocabulary import method_display
@@ -111,14 +112,14 @@ def comparison_markdown(table: pd.DataFrame) -> str:
     """The comparison (`compare_run_dirs`'s table, which names its runs) as a Markdown table with its caption."""
     before, after = str(table["before"].iloc[0]), str(table["after"].iloc[0])
     head = ["Method", "Paired", "Scoop equal"] + [name for name in PAIRED_OUTCOMES.values()]
-    lines = ["| " + " | ".join(head) + " |", "|---|" + "---:|" * (len(head) - 1)]
+    rows = []
     for _, row in table.iterrows():
         cells = [method_display(row["method"]), str(row["paired"]), f"{row['scoop_equal']}/{row['paired']}"]
         for outcome in PAIRED_OUTCOMES:
             cells.append(f"{row[f'{outcome}_before']} → {row[f'{outcome}_after']} "
                          f"(−{row[f'{outcome}_only_before']} +{row[f'{outcome}_only_after']}, p {row[f'{outcome}_p']:.2g})")
-        lines.append("| " + " | ".join(cells) + " |")
-    lines.append("")
+        rows.append(cells)
+    lines = [markdown_table(head, rows), ""]
     lines.append(f"Episodes with each outcome, {before} → {after}, on the same seeds; (−a +b): episodes that had it only "
                  "in the first run, only in the second; p: exact two-sided sign test on those. Scoop equal: scooped, "
                  "spilled, scoop success and scoop length all equal. Episodes with an error in either run are left out.")

@@ -17,6 +17,7 @@ import pandas as pd
 
 from grits_lab.errors import InputError
 from grits_lab.io import atomic_path, ensure_writable_dir, save_parquet_atomic, write_json_atomic, write_text_atomic
+from grits_lab.markdown import markdown_table
 from grits_lab.spillage.classifier_metrics import classification_report, paired_bootstrap, reliability_bins
 
 LABEL_MEANING = {
@@ -93,9 +94,9 @@ def comparison_markdown(c: Comparison, dataset: str) -> str:
         f"95 % intervals from {c.n_resamples} paired bootstrap resamples of whole episodes; "
         f"differences are {ref} minus the row's model (p: share of resamples in which {ref} is not better).",
         "",
-        f"| model | AUROC [95 %] | accuracy [95 %] | ECE | {ref} − AUROC [95 %] (p) | {ref} − accuracy [95 %] (p) |",
-        "|---|---|---|---|---|---|",
     ]
+    header = ["model", "AUROC [95 %]", "accuracy [95 %]", "ECE", f"{ref} − AUROC [95 %] (p)", f"{ref} − accuracy [95 %] (p)"]
+    rows = []
     for r in c.table.to_dict("records"):
         cells = [
             r["model"],
@@ -106,8 +107,8 @@ def comparison_markdown(c: Comparison, dataset: str) -> str:
         for metric in ("auroc", "accuracy"):
             key = f"{ref}_minus_{metric}"
             cells.append("reference" if r["model"] == ref else f"{r[key]:+.3f} [{r[key + '_lo']:+.3f}, {r[key + '_hi']:+.3f}] ({r[key + '_p']:.3f})")
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+        rows.append(cells)
+    return "\n".join(lines + [markdown_table(header, rows, right=len(header))]) + "\n"
 
 
 def plot_comparison(c: Comparison, path: Path) -> None:

@@ -1,0 +1,16 @@
+"""Markdown tables, the one way every page and summary the package writes lays one out."""
+
+from __future__ import annotations
+
+
+def markdown_table(header: list[str], rows: list[list[str]], right: int = 1) -> str:
+    """A Markdown (GitHub) table of `header` and `rows` (each as long as the header, cells already
+    formatted); columns from index `right` on are right-aligned. ValueError for a row of another
+    length."""
+    for row in rows:
+        if len(row) != len(header):
+            raise ValueError(f"a table row has {len(row)} cells, the header {len(header)}")
+    align = ["---" if i < right else "---:" for i in range(len(header))]
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(align) + "|"]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return "\n".join(lines)
