@@ -397,8 +397,8 @@ class ScoopEnv:
         """What the arm would do with the actions `path` (T, 9) from its present joint target, on the
         kinematic copy only (the world is not touched): the same IK tracking as `step` (with
         `rest_pull` and `ik_refine` as `_track`: None the current stage's; pass the settings of the
-        stages after the scoop for a motion of theirs), so entry t is what `step(path[t])` would report as `ik_failure`,
-        `joint_step` and `joint_speed_ratio`. With `touches`, also whether the arm comes within
+        stages after the scoop for a motion of theirs), so entry t is what `step(path[t])` would
+        report as `ik_failure`, `joint_step` and `joint_speed_ratio`. With `touches`, also whether the arm comes within
         ARM_CLEARANCE of the table or a bowl (`PathCheck.touches`; None without). With
         `stop_at_unreachable`, once an action after the first is unreachable the rest are reported
         unreachable (joint step 0) without solving them: enough to fail a path, and a path the
