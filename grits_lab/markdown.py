@@ -1,4 +1,6 @@
-"""Markdown tables, the one way every page and summary the package writes lays one out."""
+"""Markdown tables laid out from formatted cells: the results pages, `compare-runs` and
+`compare-predictors` (the report's own tables go through pandas, `report/render.py`). Cells are
+written as given: a `|` inside one is the caller's to escape."""
 
 from __future__ import annotations
 

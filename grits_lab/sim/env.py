@@ -38,7 +38,9 @@ ARM_CLEARANCE = 0.005
 class PathCheck:
     """`ScoopEnv.check_path`'s answer, one entry per action checked: unreachable (T,) (an IK
     residual over the tolerance on the way), joint_steps (T,) (the largest change of a commanded
-    joint over the action, rad), and the joint target at the end (7,)."""
+    joint over the action, rad), and the joint target after the last action solved (7,). A check
+    that stopped at an unreachable action (`stop_at_unreachable`) reports every action after it
+    unreachable, with joint step and speed ratio 0 and not touching."""
 
     unreachable: np.ndarray
     joint_steps: np.ndarray

@@ -149,7 +149,7 @@ class PandaKinematics:
     def jacobian(self, joints: np.ndarray) -> np.ndarray:
         """(6, 7) geometric Jacobian of the grasp frame at arm joints (7,): rows linear (m/rad) then
         angular (rad/rad) velocity in the world frame (PyBullet's calculateJacobian)."""
-        q = [float(v) for v in joints[:7]] + [0.006, 0.006]
+        q = [float(v) for v in joints[:7]] + list(self.rest[7:])  # the fingers as the arm holds them
         linear, angular = self.client.calculateJacobian(self.robot, GRASP_LINK, [0.0, 0.0, 0.0], q, [0.0] * 9, [0.0] * 9)
         return np.vstack([np.asarray(linear)[:, :7], np.asarray(angular)[:, :7]])
 
@@ -188,8 +188,8 @@ class PandaKinematics:
         refine: when PyBullet's solver stops short of `converged`, also `refine` from `seed_joints`
         and keep whichever lands closer. PyBullet's solver, seeded at an arm far from its rest
         posture, can stall centimetres short of a pose the arm reaches by moving on from where it
-        is (the scoop-v9 oracle's held transfers: every lift stalled 1-4 cm up with no joint at
-        its limit); the damped least-squares iterations move on.
+        is (2 of the scoop-v9 oracle's 9 held transfers: the lift stalled 1-4 cm up with no joint
+        at its limit); the damped least-squares iterations move on.
 
         rest_pull: the first solve pulls the arm towards REST_POSE in the null space (a natural elbow);
         False: every solve only refines from `seed_joints`, so the arm follows a path with the least

@@ -99,7 +99,7 @@ def _scene_obstacles(env, target_xy, seed=2):
 
 def _rolled(settings_class, **overrides):
     """Transfer settings with scoop-v5's roll pour (experiments/transfer_pour_roll.yaml): by the robot's base
-    its first option is out of the arm's reach, which the reach-check tests need."""
+    PyBullet's solver alone stops short of its first option, which the reach-check tests need."""
     from grits_lab.config import load_yaml
 
     return settings_class(**{**load_yaml(REPO / "experiments" / "transfer_pour_roll.yaml")["transfer"], **overrides})
@@ -122,9 +122,10 @@ def test_transfer_options_start_with_the_configured_one_and_never_repeat():
 
 
 def test_an_unreachable_pour_is_replaced_by_one_the_arm_reaches(env):
-    """A target close to the robot's base: pouring above its centre folds the elbow past its limit;
-    the check finds it before moving and takes another option, which the arm follows within the
-    Panda's joint velocity limits."""
+    """A target close to the robot's base with scoop-v9's IK (`ik_refine` off): PyBullet's solver
+    stops short of the pour above its centre; the check finds it before moving and takes another
+    option, which the arm follows within the Panda's joint velocity limits. (With the refinement
+    the first option is reached: `test_the_ik_refinement_follows_a_path_pybullets_solver_stalls_on`.)"""
     import math
 
     from grits_lab.evaluation.evaluation_config import TransferSettings
@@ -135,13 +136,13 @@ def test_an_unreachable_pour_is_replaced_by_one_the_arm_reaches(env):
     settings = _rolled(TransferSettings, alternative_pour_heights=[0.05])  # the pour the arm reaches here: 5 cm up, 3 cm out
     current = matrix_to_pose9(scene.spoon_pose())
     heading = math.atan2(target.centre[1], target.centre[0])
-    check = lambda actions: env.check_path(actions, rest_pull=False)  # noqa: E731 (the stages after the scoop)
+    check = lambda actions: env.check_path(actions, rest_pull=False, ik_refine=False)  # noqa: E731 (the stages after the scoop)
     unchecked = choose_transfer(current, target, obstacles, settings, 0.012, 0.036, heading, check=None)
     assert unchecked.option.pour_offset == 0.0 and unchecked.n_checks == 0
     assert check(unchecked.actions).unreachable[1:].any()
     plan = choose_transfer(current, target, obstacles, settings, 0.012, 0.036, heading, check=check)
     assert plan.reachable and plan.n_checks >= 2 and plan.option != unchecked.option
-    env.set_stage("carry")
+    env.set_stage("carry", ik_refine=False)
     infos = [env.step(a)[4] for a in plan.actions]
     assert not any(i["ik_failure"] for i in infos[1:])
     assert max(i["joint_speed_ratio"] for i in infos) <= 1.0
@@ -408,3 +409,54 @@ def test_the_pours_heading_alternatives_vary_fastest():
     assert transfer_options(settings)[1].describe().endswith("turned -90 deg")
     with pytest.raises(ConfigError, match="transfer.pour_axis"):
         TransferSettings(pour_axis="pitch")
+
+
+def test_the_stages_after_the_scoop_refine_the_ik_and_the_scoop_does_not(env):
+    """`set_stage` turns the refinement on after the scoop unless told otherwise; a reset starts
+    without it, and `run_transfer` passes `transfer.ik_refine` to the check and to the motion."""
+    from grits_lab.evaluation.evaluation_config import TransferSettings
+    from grits_lab.evaluation.task_episode import run_transfer
+
+    scene, _, _ = _scene_obstacles(env, (0.45, 0.28))
+    assert env.ik_refine is False
+    env.set_stage("lift")
+    assert env.ik_refine is True
+    env.set_stage("carry", ik_refine=False)
+    assert env.ik_refine is False
+    env.set_stage("scoop")
+    assert env.ik_refine is False
+    seen = {"check": set(), "solve": set()}
+    check_path, solve = env.check_path, env.kinematics.solve
+
+    def spy_check(*args, **kwargs):
+        seen["check"].add(kwargs.get("ik_refine"))
+        return check_path(*args, **kwargs)
+
+    def spy_solve(*args, **kwargs):
+        seen["solve"].add(kwargs.get("refine"))
+        return solve(*args, **kwargs)
+
+    env.check_path, env.kinematics.solve = spy_check, spy_solve
+    try:
+        run_transfer(env, scene, TransferSettings(ik_refine=False, max_checks=1))
+    finally:
+        env.check_path, env.kinematics.solve = check_path, solve
+    assert seen["check"] == {False} and seen["solve"] == {False}
+
+
+def test_a_check_told_to_stop_reports_every_action_after_its_first_failure_after_the_first(env):
+    """The first action goes from where the scoop left the arm to the measured spoon pose: what it
+    misses is the scoop's doing, so a check told to stop stops only after a failure from the second
+    action on, and reports as many entries as actions (touches too)."""
+    from grits_lab.sim.env import matrix_to_pose9
+
+    env.reset(seed=2, options={"food": "chocolate_balls", "level": "low"})
+    here = matrix_to_pose9(env.spoon_pose())
+    away = here.copy()
+    away[:3] = [1.6, 0.0, 0.4]  # twice the Panda's reach
+    path = np.stack([away, here, here, here])  # the second action's way back starts out of reach too
+    full = env.check_path(path, rest_pull=False, touches=True)
+    assert full.unreachable.tolist() == [True, True, False, False]
+    stopped = env.check_path(path, rest_pull=False, touches=True, stop_at_unreachable=True)
+    assert stopped.unreachable.tolist() == [True, True, True, True]
+    assert len(stopped.touches) == len(path) and stopped.speed_ratios[2:].tolist() == [0.0, 0.0]
