@@ -185,11 +185,14 @@ class PandaKinematics:
         """IK for a (4, 4) grasp-frame target, starting from `seed_joints`; checks the residual by FK.
 
         converged: when the solve stops refining (`IKConvergence`: `COARSE_IK`, `FINE_IK`).
-        refine: when PyBullet's solver stops short of `converged`, also `refine` from `seed_joints`
-        and keep whichever lands closer. PyBullet's solver, seeded at an arm far from its rest
-        posture, can stall centimetres short of a pose the arm reaches by moving on from where it
-        is (2 of the scoop-v9 oracle's 9 held transfers: the lift stalled 1-4 cm up with no joint
-        at its limit); the damped least-squares iterations move on.
+        refine: when PyBullet's answer is out of tolerance (`pos_tol`, `rot_tol`: an IK failure),
+        also `refine` from `seed_joints` and keep whichever lands closer; an answer within tolerance
+        stands as it is, so a motion PyBullet's solver follows is followed the same way. (Refining
+        every answer short of `converged` instead found, from some seeds, a far posture closer to
+        the pose: a joint jump that failed options PyBullet's answer had passed.) PyBullet's solver,
+        seeded at an arm far from its rest posture, can stall centimetres short of a pose the arm
+        reaches by moving on from where it is (2 of the scoop-v9 oracle's 9 held transfers: the lift
+        stalled 1-4 cm up with no joint at its limit); the damped least-squares iterations move on.
 
         rest_pull: the first solve pulls the arm towards REST_POSE in the null space (a natural elbow);
         False: every solve only refines from `seed_joints`, so the arm follows a path with the least
@@ -217,7 +220,7 @@ class PandaKinematics:
             if converged.reached(perr, rerr):
                 break
         assert best is not None
-        if refine and not converged.reached(best.position_error, best.orientation_error):
+        if refine and not best.ok:
             joints = self.refine(target, seed_joints, converged)
             e = self.residual(target, joints)
             perr, rerr = float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))

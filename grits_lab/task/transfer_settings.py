@@ -83,8 +83,8 @@ class TransferSettings:
     # min-jerk version), an arm far from its rest posture swings shoulder against upper arm in
     # one action however slowly it moves (measured 0.34 rad in 0.1 s, 1.6x the Panda's limit).
     rest_pull: bool = False
-    # Every IK solve in these stages that PyBullet's solver leaves short of its residual is refined
-    # by damped least squares from where the arm is (`PandaKinematics.refine`), as a robot's
+    # Every IK solve in these stages that PyBullet's solver fails (out of the IK tolerance) is tried
+    # again by damped least squares from where the arm is (`PandaKinematics.refine`), as a robot's
     # Cartesian controller follows a path. Off (scoop-v9 and earlier): PyBullet's answer alone,
     # which stalled 1-4 cm into the lift of 2 of the scoop-v9 oracle's 9 held transfers; the
     # other 7 held because the scoop left the wrist at its joint limits (docs/evaluation.md).
