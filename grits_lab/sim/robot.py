@@ -191,7 +191,7 @@ class PandaKinematics:
         every answer short of `converged` instead found, from some seeds, a far posture closer to
         the pose: a joint jump that failed options PyBullet's answer had passed.) PyBullet's solver,
         seeded at an arm far from its rest posture, can stall centimetres short of a pose the arm
-        reaches by moving on from where it is (2 of the scoop-v9 oracle's 9 held transfers: the lift
+        reaches by moving on from where it is (3 of the scoop-v9 oracle's 9 held transfers: the lift
         stalled 1-4 cm up with no joint at its limit); the damped least-squares iterations move on.
 
         rest_pull: the first solve pulls the arm towards REST_POSE in the null space (a natural elbow);

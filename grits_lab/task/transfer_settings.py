@@ -86,8 +86,9 @@ class TransferSettings:
     # Every IK solve in these stages that PyBullet's solver fails (out of the IK tolerance) is tried
     # again by damped least squares from where the arm is (`PandaKinematics.refine`), as a robot's
     # Cartesian controller follows a path. Off (scoop-v9 and earlier): PyBullet's answer alone,
-    # which stalled 1-4 cm into the lift of 2 of the scoop-v9 oracle's 9 held transfers; the
-    # other 7 held because the scoop left the wrist at its joint limits (docs/evaluation.md).
+    # which stalled 1-4 cm into the lift of 3 of the scoop-v9 oracle's 9 held transfers; of the
+    # other 6, the one traced held because the scoop left the wrist at its joint limits
+    # (docs/evaluation.md).
     ik_refine: bool = True
     slow_to_limits: bool = True
     # With the reach check: an option whose arm (not the spoon) comes within 5 mm of the table or a
