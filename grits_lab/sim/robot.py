@@ -82,6 +82,11 @@ class IKResult:
     orientation_error: float
     ok: bool
 
+    @property
+    def miss(self) -> float:
+        """How far the answer lands from the pose, as `solve` ranks answers: metres plus 0.05 m per radian."""
+        return self.position_error + 0.05 * self.orientation_error
+
 
 @dataclass(frozen=True)
 class IKConvergence:
@@ -215,8 +220,9 @@ class PandaKinematics:
             perr = float(np.linalg.norm(reached[:3, 3] - position))
             rdiff = reached[:3, :3].T @ target[:3, :3]
             rerr = float(math.acos(np.clip((np.trace(rdiff) - 1) / 2, -1.0, 1.0)))
-            if best is None or perr + 0.05 * rerr < best.position_error + 0.05 * best.orientation_error:
-                best = IKResult(joints, perr, rerr, perr <= pos_tol and rerr <= rot_tol)
+            answer = IKResult(joints, perr, rerr, perr <= pos_tol and rerr <= rot_tol)
+            if best is None or answer.miss < best.miss:
+                best = answer
             if converged.reached(perr, rerr):
                 break
         assert best is not None
@@ -224,8 +230,9 @@ class PandaKinematics:
             joints = self.refine(target, seed_joints, converged)
             e = self.residual(target, joints)
             perr, rerr = float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))
-            if perr + 0.05 * rerr < best.position_error + 0.05 * best.orientation_error:
-                best = IKResult(joints, perr, rerr, perr <= pos_tol and rerr <= rot_tol)
+            answer = IKResult(joints, perr, rerr, perr <= pos_tol and rerr <= rot_tol)
+            if answer.miss < best.miss:
+                best = answer
         return best
 
     def close(self) -> None:
