@@ -102,6 +102,22 @@ def rotation_vector(matrix: np.ndarray) -> np.ndarray:
     return v / s * 2.0 * math.atan2(s, abs(w))
 
 
+def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(3,) axis-angle vector (radians) of the shortest rotation taking direction `a` (3,) to `b` (3,):
+    its axis is a x b, so it has no component along either; zero when they agree, and for
+    opposite directions any axis normal to `a`."""
+    a = np.asarray(a, dtype=np.float64) / np.linalg.norm(a)
+    b = np.asarray(b, dtype=np.float64) / np.linalg.norm(b)
+    axis = np.cross(a, b)
+    s, c = float(np.linalg.norm(axis)), float(np.clip(a @ b, -1.0, 1.0))
+    if s < 1e-12:
+        if c > 0:
+            return np.zeros(3)
+        normal = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        return normal / np.linalg.norm(normal) * math.pi
+    return axis / s * math.atan2(s, c)
+
+
 def axis_angle_matrix(axis: np.ndarray, angles: np.ndarray | float) -> np.ndarray:
     """(..., 3, 3) rotations by `angles` (radians) about one unit `axis` (3,), by Rodrigues' formula."""
     k = np.asarray(axis, dtype=np.float64)

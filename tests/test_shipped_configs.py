@@ -53,6 +53,7 @@ def test_the_previous_transfer_override_and_the_oracle_use_seeds_no_evaluation_u
     previous = load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(ROOT / "experiments" / "transfer_previous.yaml")))
     assert (previous.transfer.profile, previous.transfer.rest_pull, previous.transfer.slow_to_limits) == ("constant", True, False)
     assert previous.transfer.interpolation == "linear" and previous.transfer.ik_refine is False  # scoop-v8's motion and v9's IK
+    assert previous.transfer.heading_free_lift is False  # scoop-v10's options
     oracle = load_evaluation_config(ROOT / "experiments" / "oracle_transfer.yaml")
     assert oracle.methods == ["expert"] and len(oracle.foods) == 16
     used = {load_evaluation_config(p).seed for p in (ROOT / "experiments").glob("evaluate*.yaml")}

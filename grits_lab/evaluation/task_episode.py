@@ -237,8 +237,9 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     check = ((lambda actions: env.check_path(actions, rest_pull=settings.rest_pull, touches=settings.avoid_arm_contact,
                                              ik_refine=settings.ik_refine, stop_at_unreachable=settings.no_option == "hold"))
              if settings.reach_check else None)
+    heading_free = env.heading_free_path if settings.reach_check and settings.heading_free_lift else None
     plan = choose_transfer(current, target, obstacles, settings, max_step, reach, heading, check,
-                           spoon.pour_edge(settings.pour_axis))
+                           spoon.pour_edge(settings.pour_axis), heading_free)
     ik_failures, joint_steps, speed_ratios = 0, [0.0], [0.0]
     spilled_by_stage: dict[str, int] = {}
 

@@ -153,29 +153,66 @@ def plan_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
     `pour_motion` lowers), along its -x axis for "tip" (its tip). InputError when the path would
     cross an obstacle.
     """
+    lift = lift_path(current, obstacles, clearance, max_step, spoon_reach, level_steps, level_yaw_offset, profile)
+    carry = carry_path(lift[-1], target, obstacles, safe_height(current, obstacles, clearance, spoon_reach), pour_height,
+                       max_step, spoon_reach, target_heading, pour_offset, profile, lip_offset, pour_axis,
+                       lifted_rotation(current, level_yaw_offset))
+    return np.concatenate([lift, carry])
+
+
+def safe_height(current: np.ndarray, obstacles: list[Obstacle], clearance: float, spoon_reach: float) -> float:
+    """World z (m) the spoon's centre is lifted to from `current` (9,): `clearance` and `spoon_reach`
+    above every obstacle's top, and never below where it is."""
+    return max([float(current[2])] + [ob.top + clearance + spoon_reach for ob in obstacles])
+
+
+def lift_path(current: np.ndarray, obstacles: list[Obstacle], clearance: float, max_step: float, spoon_reach: float,
+              level_steps: int = 1, level_yaw_offset: float = 0.0, profile: str = "constant") -> np.ndarray:
+    """(L, 9) the lift of `plan_transfer`: straight up from `current` (9,) to the safe height above every
+    obstacle (`clearance` and `spoon_reach` over its top), turning the spoon from its tipped pose to
+    level (its heading turned by `level_yaw_offset` rad) over at least `level_steps` actions."""
+    rotation = lifted_rotation(current, level_yaw_offset)
+    start = np.asarray(current[:3], dtype=np.float64)
+    safe_z = safe_height(current, obstacles, clearance, spoon_reach)
+    tipped = rot6d_to_matrix(np.asarray(current[3:9], dtype=np.float64))
+    return np.stack(_line(start, np.array([start[0], start[1], safe_z]), tipped, max_step, rotation, level_steps, profile))
+
+
+def lifted_rotation(current: np.ndarray, level_yaw_offset: float = 0.0) -> np.ndarray:
+    """(3, 3) the level spoon at the top of `lift_path` from `current` (9,): the scoop's heading turned
+    by `level_yaw_offset` rad."""
     rotation = level_rotation(current)
     if level_yaw_offset:
         rotation = heading_rotation(math.atan2(rotation[1, 0], rotation[0, 0]) + level_yaw_offset)
-    start = np.asarray(current[:3], dtype=np.float64)
-    safe_z = max([start[2]] + [ob.top + clearance + spoon_reach for ob in obstacles])
+    return rotation
+
+
+def carry_path(lifted: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], height: float, pour_height: float,
+               max_step: float, spoon_reach: float, target_heading: float | None = None, pour_offset: float = 0.0,
+               profile: str = "constant", lip_offset: float = 0.0, pour_axis: str = "roll",
+               rotation: np.ndarray | None = None) -> np.ndarray:
+    """(C, 9) the carry of `plan_transfer` from the lifted, level spoon `lifted` (9,): across at `height`
+    (world z, m: the lift's `safe_height`) to above the pour point, turning to `target_heading` (None:
+    keeping its heading), then down to it; the other arguments are `plan_transfer`'s. rotation: the
+    lifted spoon's (3, 3) when it is known exactly (`lifted_rotation`; None: read from `lifted`, whose
+    6-D rotation is single precision). InputError when it would cross an obstacle other than the
+    target bowl (the source bowl, which the lift leaves by design, included)."""
+    rotation = level_rotation(lifted) if rotation is None else rotation
+    start = np.asarray(lifted[:3], dtype=np.float64)
     centre = np.asarray(target.centre[:2], dtype=np.float64)
     if pour_offset:
         centre = centre + pour_offset * centre / max(float(np.linalg.norm(centre)), 1e-9)
     arrival = rotation if target_heading is None else heading_rotation(target_heading)
     if lip_offset:
         centre = centre + lip_offset * (arrival[:2, 1] if pour_axis == "roll" else -arrival[:2, 0])
-    above_target = np.array([centre[0], centre[1], safe_z])
+    above_target = np.array([centre[0], centre[1], height])
     pour_point = np.array([centre[0], centre[1], target.rim_height + pour_height])
-    tipped = rot6d_to_matrix(np.asarray(current[3:9], dtype=np.float64))
-    waypoints = _line(start, np.array([start[0], start[1], safe_z]), tipped, max_step, rotation, level_steps, profile)
-    lifted = len(waypoints) - 1  # the vertical lift leaves the source bowl by design
-    waypoints += _line(waypoints[-1][:3].astype(np.float64), above_target, rotation, max_step, arrival, profile=profile)
+    waypoints = _line(start, above_target, rotation, max_step, arrival, profile=profile)
     waypoints += _line(above_target, pour_point, arrival, max_step, profile=profile)
     path = np.stack(waypoints)
-    # The lift starts in the source bowl and the descent ends in the target's cylinder by design:
-    # check the way between them.
+    # The descent ends in the target's cylinder by design: check the way there.
     others = [ob for ob in obstacles if np.linalg.norm(ob.centre_xy - target.centre[:2]) > 1e-3]
-    if not path_is_clear(path, others, spoon_reach, start_index=lifted):
+    if not path_is_clear(np.concatenate([np.asarray(lifted, dtype=np.float32)[None], path]), others, spoon_reach):
         raise InputError("no collision-free transfer path at the configured clearance")
     return path
 
@@ -252,10 +289,14 @@ class TransferOption:
     pour_height: float
     pour_offset: float
     pour_yaw_deg: float = 0.0
+    # The lift's heading left to the arm, which unwinds its wrist from its joint limits on the way up
+    # (`ScoopEnv.heading_free_path`); the carry then starts from the heading the lift ends with.
+    heading_free: bool = False
 
     def describe(self) -> str:
         yaw = f", turned {self.pour_yaw_deg:+g} deg" if self.pour_yaw_deg else ""
-        return (f"level over {self.level_steps} actions, heading {self.level_yaw_deg:+g} deg; "
+        heading = "heading free (wrist unwound)" if self.heading_free else f"heading {self.level_yaw_deg:+g} deg"
+        return (f"level over {self.level_steps} actions, {heading}; "
                 f"pour {self.pour_height * 100:g} cm above the rim, {self.pour_offset * 100:+g} cm out{yaw}")
 
 
@@ -277,48 +318,68 @@ class TransferPlan:
         return sum(stage == "pour" for stage in self.stages)
 
 
-def transfer_options(settings: Any) -> list[TransferOption]:
+def transfer_options(settings: Any, heading_free: bool = False) -> list[TransferOption]:
     """The options to try, in order: the configured one first; lifts keep the scoop's heading before
     they turn it, and level over the configured actions before the alternatives; each lift with the
     configured pour first, then the pour alternatives, the pour's heading varying fastest
-    (`TransferSettings`, grits_lab/task/transfer_settings.py)."""
-    lifts = [(n, y) for y, n in itertools.product([0.0] + list(settings.alternative_level_yaw_deg),
-                                                  [settings.level_steps] + list(settings.alternative_level_steps))]
+    (`TransferSettings`, grits_lab/task/transfer_settings.py). heading_free: the options whose lift
+    leaves the heading to the arm instead (`TransferOption.heading_free`; no heading turns), in the
+    same order, which `choose_transfer` tries when every option above has failed."""
+    yaws = [0.0] if heading_free else [0.0] + list(settings.alternative_level_yaw_deg)
+    lifts = [(n, y) for y, n in itertools.product(yaws, [settings.level_steps] + list(settings.alternative_level_steps))]
     pours = list(itertools.product([settings.pour_height] + list(settings.alternative_pour_heights),
                                    [0.0] + list(settings.alternative_pour_offsets),
                                    [settings.pour_yaw_deg] + list(settings.alternative_pour_yaw_deg)))
     seen, out = set(), []
     for (n, y), (h, o, w) in itertools.product(lifts, pours):
-        option = TransferOption(int(n), float(y), float(h), float(o), float(w))
+        option = TransferOption(int(n), float(y), float(h), float(o), float(w), heading_free)
         if option not in seen:
             seen.add(option)
             out.append(option)
     return out
 
 
+# What a heading-free lift gives (`ScoopEnv.heading_free_path` through `choose_transfer`'s `heading_free`):
+# for the lift's actions (L, 9), the spoon poses (L, 9) the arm reaches and whether each was reached.
+HeadingFreeLift = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
 def option_motion(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], settings: Any, max_step: float,
                   spoon_reach: float, target_heading: float | None, option: TransferOption,
-                  pour_edge: float = 0.0) -> tuple[np.ndarray, list[str]]:
-    """The actions (T, 9) of one option, lift to pour, and each action's stage. pour_edge: metres from
-    the spoon's centre to the edge the food leaves by (its -y lip for `settings.pour_axis` "roll",
-    its tip for "tip"); with `settings.pour_lip_over_centre` that edge pours over the target's centre."""
+                  pour_edge: float = 0.0, heading_free: HeadingFreeLift | None = None
+                  ) -> tuple[np.ndarray, list[str], bool]:
+    """The actions (T, 9) of one option, lift to pour, each action's stage, and whether its lift was
+    reached (always True but for a heading-free lift the arm could not follow). pour_edge: metres
+    from the spoon's centre to the edge the food leaves by (its -y lip for `settings.pour_axis`
+    "roll", its tip for "tip"); with `settings.pour_lip_over_centre` that edge pours over the
+    target's centre. heading_free: how the arm lifts with its heading free, needed by an option
+    with `heading_free` (ValueError without it): its lift is the planned one with each pose's
+    heading as the arm leaves it, and the carry starts from where that lift ends."""
     lip_offset = pour_edge if settings.pour_lip_over_centre else 0.0
     if target_heading is not None:
         target_heading += math.radians(option.pour_yaw_deg)
-    path = plan_transfer(current, target, obstacles, settings.clearance, option.pour_height, max_step, spoon_reach,
-                         option.level_steps, target_heading, math.radians(option.level_yaw_deg), option.pour_offset,
-                         settings.profile, lip_offset, settings.pour_axis)
-    pour = pour_motion(path[-1], settings.pour_angle_deg, settings.pour_steps, settings.profile, settings.pour_axis,
+    lift = lift_path(current, obstacles, settings.clearance, max_step, spoon_reach, option.level_steps,
+                     math.radians(option.level_yaw_deg), settings.profile)
+    reached, rotation = True, lifted_rotation(current, math.radians(option.level_yaw_deg))
+    if option.heading_free:
+        if heading_free is None:
+            raise ValueError("a heading-free option needs the arm's heading-free lift (`heading_free`)")
+        lift, lift_reached = heading_free(lift)
+        reached, rotation = bool(np.all(lift_reached)), level_rotation(lift[-1])
+    height = safe_height(current, obstacles, settings.clearance, spoon_reach)
+    carry = carry_path(lift[-1], target, obstacles, height, option.pour_height, max_step, spoon_reach,
+                       target_heading, option.pour_offset, settings.profile, lip_offset, settings.pour_axis, rotation)
+    pour = pour_motion(carry[-1], settings.pour_angle_deg, settings.pour_steps, settings.profile, settings.pour_axis,
                        tip=pour_edge)
-    lift = lift_length(path)
-    hold = np.repeat(path[lift - 1 : lift], settings.lift_hold_steps, axis=0)  # the lifted spoon held still
-    stages = ["lift"] * (lift + len(hold)) + ["carry"] * (len(path) - lift) + ["pour"] * len(pour)
-    return np.concatenate([path[:lift], hold, path[lift:], pour]), stages
+    hold = np.repeat(lift[-1:], settings.lift_hold_steps, axis=0)  # the lifted spoon held still
+    stages = ["lift"] * (len(lift) + len(hold)) + ["carry"] * len(carry) + ["pour"] * len(pour)
+    return np.concatenate([lift, hold, carry, pour]).astype(np.float32), stages, reached
 
 
 def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[Obstacle], settings: Any, max_step: float,
                     spoon_reach: float, target_heading: float | None,
-                    check: Callable[[np.ndarray], Any] | None, pour_edge: float = 0.0) -> TransferPlan:
+                    check: Callable[[np.ndarray], Any] | None, pour_edge: float = 0.0,
+                    heading_free: HeadingFreeLift | None = None) -> TransferPlan:
     """Plan the transfer and pour, checked for reach (and slowed to the Panda's joint limits) when
     `check` is given.
 
@@ -332,41 +393,56 @@ def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[O
     that fails while rising skips its other pours. After `settings.max_checks` options without a
     pass, the one with the smallest joint step, then the fewest unreachable actions, is taken,
     with `reachable` False.
+
+    heading_free (with `check`): when no option passes, the heading-free options
+    (`transfer_options(settings, heading_free=True)`, their lifts from this callable, see
+    `option_motion`) are tried in the same way, with `settings.max_checks` checks of their own. A
+    heading-free lift the arm did not reach fails without a check. Every motion an option with the
+    scoop's heading passes is therefore chosen as without them.
     """
     best: tuple[tuple[float, int], TransferPlan] | None = None
-    n_checks, failed_lift = 0, None
-    for option in transfer_options(settings):
-        if failed_lift == (option.level_steps, option.level_yaw_deg):
-            continue
-        actions, stages = option_motion(current, target, obstacles, settings, max_step, spoon_reach, target_heading, option,
-                                        pour_edge)
-        if check is None:
-            return TransferPlan(actions, stages, option, reachable=True, n_checks=0)
-        n_checks += 1
-        if settings.slow_to_limits:
-            actions, stages, answer, within = slow_to_limits(current, actions, stages, check, settings.max_slowdown)
-            bad = answer.speed_ratios > 1.0 + 1e-9 if not within else np.zeros(len(actions), dtype=bool)
-            key_step = float(answer.speed_ratios.max())
-        else:
-            answer = check(actions)
-            bad = answer.joint_steps > settings.max_joint_step
-            key_step = max(float(answer.joint_steps.max()), settings.max_joint_step)
-        unreachable = answer.unreachable.copy()
-        if settings.avoid_arm_contact and answer.touches is not None:  # an arm that would strike the table or a bowl
-            unreachable |= answer.touches
-        unreachable[0] = False  # where the scoop left the arm (see above)
-        bad = bad | unreachable
-        plan = TransferPlan(actions, stages, option, not bad.any(), n_checks)
-        if plan.reachable:
-            return plan
-        key = (key_step, int(answer.unreachable[1:].sum()))
-        if best is None or key < best[0]:
-            best = (key, plan)
-        if stages[int(np.argmax(bad))] == "lift":
-            failed_lift = (option.level_steps, option.level_yaw_deg)
-        if n_checks >= settings.max_checks:
-            break
-    assert best is not None
+    n_checks = 0
+    families = [transfer_options(settings)]
+    if heading_free is not None and check is not None:
+        families.append(transfer_options(settings, heading_free=True))
+    for options in families:
+        failed_lift, family_checks = None, 0
+        for option in options:
+            if failed_lift == (option.level_steps, option.level_yaw_deg):
+                continue
+            actions, stages, lift_reached = option_motion(current, target, obstacles, settings, max_step, spoon_reach,
+                                                          target_heading, option, pour_edge, heading_free)
+            if check is None:
+                return TransferPlan(actions, stages, option, reachable=True, n_checks=0)
+            if not lift_reached:  # the arm cannot lift with its heading free: no motion to check
+                failed_lift = (option.level_steps, option.level_yaw_deg)
+                continue
+            n_checks += 1
+            family_checks += 1
+            if settings.slow_to_limits:
+                actions, stages, answer, within = slow_to_limits(current, actions, stages, check, settings.max_slowdown)
+                bad = answer.speed_ratios > 1.0 + 1e-9 if not within else np.zeros(len(actions), dtype=bool)
+                key_step = float(answer.speed_ratios.max())
+            else:
+                answer = check(actions)
+                bad = answer.joint_steps > settings.max_joint_step
+                key_step = max(float(answer.joint_steps.max()), settings.max_joint_step)
+            unreachable = answer.unreachable.copy()
+            if settings.avoid_arm_contact and answer.touches is not None:  # an arm that would strike the table or a bowl
+                unreachable |= answer.touches
+            unreachable[0] = False  # where the scoop left the arm (see above)
+            bad = bad | unreachable
+            plan = TransferPlan(actions, stages, option, not bad.any(), n_checks)
+            if plan.reachable:
+                return plan
+            key = (key_step, int(answer.unreachable[1:].sum()))
+            if best is None or key < best[0]:
+                best = (key, plan)
+            if stages[int(np.argmax(bad))] == "lift":
+                failed_lift = (option.level_steps, option.level_yaw_deg)
+            if family_checks >= settings.max_checks:
+                break
+    assert best is not None, "no option could be checked"
     best[1].n_checks = n_checks
     return best[1]
 

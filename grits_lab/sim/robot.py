@@ -16,7 +16,7 @@ import pybullet as pb
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
 
-from grits_lab.geometry import matrix_to_quat, quat_to_matrix, rotation_vector
+from grits_lab.geometry import matrix_to_quat, quat_to_matrix, rotation_between, rotation_vector
 from grits_lab.sim.bullet import connect_direct
 from grits_lab.sim.shapes import SpoonGeometry
 
@@ -35,6 +35,9 @@ PANDA_MAX_JOINT_VELOCITY = (2.1750, 2.1750, 2.1750, 2.1750, 2.6100, 2.6100, 2.61
 DLS_DAMPING = 0.02
 DLS_MAX_STEP = 0.2
 DLS_ITERATIONS = 300
+# `PandaKinematics.solve_heading_free`: the most its null-space step away from the joint limits moves
+# a joint per solve (rad): at one solve per 0.1 s action, 0.3 rad/s, an eighth of the Panda's limits.
+LIMIT_AVOID_STEP = 0.03
 # A comfortable configuration with the hand pointing forward and down: the IK null-space target.
 REST_POSE = (0.0, 0.2, 0.0, -2.0, 0.0, 2.6, 0.785)
 
@@ -184,6 +187,54 @@ class PandaKinematics:
             dq = jac.T @ np.linalg.solve(jac @ jac.T + DLS_DAMPING**2 * np.eye(6), e)
             q = np.clip(q + dq * min(1.0, DLS_MAX_STEP / max(float(np.abs(dq).max()), 1e-12)), lower, upper)
         return q
+
+    def solve_heading_free(self, target: np.ndarray, seed_joints: np.ndarray, pivot: np.ndarray,
+                           converged: IKConvergence = FINE_IK, limit_step: float = LIMIT_AVOID_STEP,
+                           iterations: int = DLS_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
+        """Joints (7,) that hold a point and the tilt of a (4, 4) grasp-frame target, its heading about
+        the world's vertical left free, from `seed_joints`; and the 5 residuals there (m, m, m, rad, rad).
+
+        pivot: (3,) the point, in the grasp frame, whose world position is held (the spoon's centre:
+        turning the spoon's heading about its centre keeps its load where it is). The task is five-
+        dimensional: the pivot's position and where the world's vertical lies in the grasp frame
+        (the tilt, two angles); a rotation about the world's vertical through the pivot changes
+        neither. The arm's seven joints then leave a two-dimensional null space instead of one,
+        and the solver spends it on moving away from the joint limits: first one step of at most
+        `limit_step` rad down the gradient of H(q) = sum_j ((q_j - mid_j) / range_j)^2, projected
+        onto the task's null space (Liegeois 1977), then damped least squares on the five task rows
+        (`refine`'s iteration, Wampler 1986) until the residual is within `converged` or after
+        `iterations`. Every iterate is clipped to the joint limits."""
+        lower, upper = np.asarray(self.lower[:7]), np.asarray(self.upper[:7])
+        mid, span = (lower + upper) / 2, upper - lower
+        pivot = np.asarray(pivot, dtype=np.float64)
+        goal = target[:3, :3] @ pivot + target[:3, 3]
+        up_in_grasp = target[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+
+        def task(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            reached = self.forward(q)
+            r = reached[:3, :3] @ pivot
+            w = reached[:3, :3] @ up_in_grasp  # where the target's vertical lies now; held, it is the world's
+            tilt = rotation_between(w, np.array([0.0, 0.0, 1.0]))
+            jac = self.jacobian(q)
+            skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+            rows = np.vstack([jac[:3] - skew @ jac[3:], jac[3:5]])  # the pivot's velocity; tilting about world x, y
+            return np.concatenate([goal - (reached[:3, 3] + r), tilt[:2]]), rows
+
+        q = np.clip(np.asarray(seed_joints, dtype=np.float64)[:7], lower, upper)
+        if limit_step > 0:
+            _, rows = task(q)
+            inverse = rows.T @ np.linalg.inv(rows @ rows.T + DLS_DAMPING**2 * np.eye(5))
+            away = -(np.eye(7) - inverse @ rows) @ ((q - mid) / span**2)
+            if np.abs(away).max() > 1e-12:
+                q = np.clip(q + away * (limit_step / float(np.abs(away).max())), lower, upper)
+        for _ in range(iterations):
+            e, rows = task(q)
+            if converged.reached(float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))):
+                break
+            dq = rows.T @ np.linalg.solve(rows @ rows.T + DLS_DAMPING**2 * np.eye(5), e)
+            q = np.clip(q + dq * min(1.0, DLS_MAX_STEP / max(float(np.abs(dq).max()), 1e-12)), lower, upper)
+        e, _ = task(q)
+        return q, e
 
     def solve(self, target: np.ndarray, seed_joints: np.ndarray, pos_tol: float, rot_tol: float, rest_pull: bool = True,
               converged: IKConvergence = COARSE_IK, refine: bool = False) -> IKResult:

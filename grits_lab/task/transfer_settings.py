@@ -90,6 +90,14 @@ class TransferSettings:
     # other 6, the one traced held because the scoop left the wrist at its joint limits
     # (docs/evaluation.md).
     ik_refine: bool = True
+    # When no option passes with the scoop's heading (or one of `alternative_level_yaw_deg`), the
+    # options again with the lift's heading about the vertical left to the arm, which spends the
+    # freedom on unwinding its wrist from its joint limits as the spoon rises and levels
+    # (`ScoopEnv.heading_free_path`; the carry starts from the heading the lift ends with), with
+    # `max_checks` checks of their own (scoop-v11). Traced under scoop-v10: the scoop left the
+    # wrist wound towards its limits and levelling the spoon with its heading fixed asked for more
+    # (docs/evaluation.md). False: scoop-v10's options only.
+    heading_free_lift: bool = True
     slow_to_limits: bool = True
     # With the reach check: an option whose arm (not the spoon) comes within 5 mm of the table or a
     # bowl on the kinematic copy fails too, as a motion planner's collision check fails it. The

@@ -344,8 +344,8 @@ def test_a_lift_hold_keeps_the_lifted_spoon_still_over_the_source_bowl_before_th
     start = np.array([0.6, -0.1, 0.06, 1, 0, 0, 0, 1, 0], dtype=np.float32)
     target = BowlEstimate(np.array([0.45, 0.3, 0.0]), 0.058, 0.045, 100, 0.0)
     option = TransferOption(10, 0.0, 0.005, 0.0)
-    plain, plain_stages = option_motion(start, target, [], TransferSettings(), 0.012, 0.036, None, option)
-    held, held_stages = option_motion(start, target, [], TransferSettings(lift_hold_steps=7), 0.012, 0.036, None, option)
+    plain, plain_stages, _ = option_motion(start, target, [], TransferSettings(), 0.012, 0.036, None, option)
+    held, held_stages, _ = option_motion(start, target, [], TransferSettings(lift_hold_steps=7), 0.012, 0.036, None, option)
     lift = lift_length(plain)
     assert len(held) == len(plain) + 7 and held_stages.count("lift") == plain_stages.count("lift") + 7
     np.testing.assert_array_equal(held[lift : lift + 7], np.repeat(plain[lift - 1 : lift], 7, axis=0))  # still, at the lift's top
@@ -460,3 +460,103 @@ def test_a_check_told_to_stop_reports_every_action_after_its_first_failure_after
     stopped = env.check_path(path, rest_pull=False, touches=True, stop_at_unreachable=True)
     assert stopped.unreachable.tolist() == [True, True, True, True]
     assert len(stopped.touches) == len(path) and stopped.speed_ratios[2:].tolist() == [0.0, 0.0]
+
+
+def _turned(actions, yaw):
+    """(T, 9) the poses turned by `yaw` rad about the vertical through each spoon centre."""
+    from grits_lab.geometry import axis_angle_matrix, matrix_to_rot6d, rot6d_to_matrix
+
+    turn = axis_angle_matrix([0.0, 0.0, 1.0], yaw)
+    return np.array([np.concatenate([a[:3], matrix_to_rot6d(turn @ rot6d_to_matrix(a[3:9].astype(np.float64)))])
+                     for a in actions], dtype=np.float32)
+
+
+def test_heading_free_options_repeat_the_lifts_and_pours_without_heading_turns():
+    from grits_lab.evaluation.transfer import transfer_options
+    from grits_lab.task.transfer_settings import TransferSettings
+
+    settings = TransferSettings()
+    fixed, free = transfer_options(settings), transfer_options(settings, heading_free=True)
+    assert not any(o.heading_free for o in fixed) and all(o.heading_free for o in free)
+    assert {o.level_yaw_deg for o in free} == {0.0}
+    assert [(o.level_steps, o.pour_height, o.pour_offset, o.pour_yaw_deg) for o in free] == \
+        [(o.level_steps, o.pour_height, o.pour_offset, o.pour_yaw_deg) for o in fixed if o.level_yaw_deg == 0.0]
+    assert "heading free" in free[0].describe()
+
+
+def test_heading_free_lifts_are_tried_only_after_every_option_with_the_scoops_heading_failed():
+    """A constructed arm that cannot lift with any fixed heading (every lift unreachable in its
+    second action) but follows a lift it turns by 0.4 rad: the fixed options are checked first,
+    `max_checks` at most, then the heading-free ones with a budget of their own; the first of them
+    passes, its carry starting from the lift's turned heading. A heading-free lift the arm does not
+    reach is never checked."""
+    from types import SimpleNamespace
+
+    from grits_lab.evaluation.transfer import BowlEstimate, choose_transfer, level_rotation, option_motion
+    from grits_lab.task.transfer_settings import TransferSettings
+
+    start = np.array([0.6, -0.1, 0.06, 1, 0, 0, 0, 1, 0], dtype=np.float32)
+    target = BowlEstimate(np.array([0.45, 0.3, 0.0]), 0.058, 0.045, 100, 0.0)
+    settings = TransferSettings(max_checks=5)
+    checked = []
+
+    def check(actions):
+        n = len(actions)
+        heading = level_rotation(actions[1])
+        turned = abs(np.arctan2(heading[1, 0], heading[0, 0]) - 0.4) < 1e-4
+        checked.append(turned)
+        unreachable = np.zeros(n, bool)
+        unreachable[1] = not turned
+        return SimpleNamespace(unreachable=unreachable, joint_steps=np.full(n, 0.05), speed_ratios=np.full(n, 0.2), touches=None)
+
+    free = lambda lift: (_turned(lift, 0.4), np.ones(len(lift), bool))  # noqa: E731
+    plan = choose_transfer(start, target, [], settings, 0.012, 0.036, None, check, heading_free=free)
+    assert plan.reachable and plan.option.heading_free and plan.option.level_steps == settings.level_steps
+    # one check per fixed lift (its other pours skipped once it fails while rising), at most 5; then one
+    assert checked == [False] * 5 + [True] and plan.n_checks == 6
+    np.testing.assert_allclose(plan.actions[plan.stages.count("lift")][3:], plan.actions[plan.stages.count("lift") - 1][3:],
+                               atol=1e-5)  # the carry starts level with the heading the lift ended with
+    without = choose_transfer(start, target, [], settings, 0.012, 0.036, None, check)
+    assert not without.reachable and without.n_checks == 5
+    checked.clear()
+    unreached = lambda lift: (_turned(lift, 0.4), np.arange(len(lift)) < 3)  # noqa: E731
+    plan = choose_transfer(start, target, [], settings, 0.012, 0.036, None, check, heading_free=unreached)
+    assert not plan.reachable and not plan.option.heading_free and checked == [False] * 5
+    with pytest.raises(ValueError, match="heading-free"):
+        option_motion(start, target, [], settings, 0.012, 0.036, None, plan.option.__class__(10, 0.0, 0.04, 0.0, 90.0, True))
+
+
+def test_a_lift_the_scoop_left_unreachable_with_its_heading_is_followed_with_the_heading_free():
+    """The oracle's fudge, low, trial 3 (experiments/oracle_transfer.yaml, root seed 9000): the scripted
+    scoop leaves the wrist wound towards its limits, and under scoop-v10 no option passed the reach
+    check, so the arm held the loaded spoon. With the heading free the lift unwinds the wrist and
+    the spoon reaches the target bowl; the turned spoon is measured, not assumed: the episode's
+    record says where its food went."""
+    from dataclasses import replace
+
+    from grits_lab.evaluation.evaluation_config import load_evaluation_config
+    from grits_lab.evaluation.methods import build_controller
+    from grits_lab.evaluation.task_episode import begin_episode, run_scoop, run_transfer
+    from grits_lab.seeding import derive_seed
+
+    config = load_evaluation_config(REPO / "experiments" / "oracle_transfer.yaml")
+    env = ScoopEnv(config.sim)
+    try:
+        builder = builder_for_env(config.cloud, env)
+        controller = build_controller("expert", config, {}, lambda key, factory: factory())
+        outcomes = {}
+        for free in (False, True):
+            scene, history = begin_episode(env, builder, seed=derive_seed(config.seed, "fudge", "low", 3), food="fudge",
+                                           level="low")
+            scooped = int(run_scoop(env, controller, scene, history, config.scoop)["metrics"]["scooped"])
+            outcomes[free] = run_transfer(env, scene, replace(config.transfer, heading_free_lift=free))
+    finally:
+        env.close()
+    assert scooped > 0
+    assert outcomes[False]["plan"].startswith("held") and outcomes[False]["metrics"]["transferred"] == 0
+    released = outcomes[True]
+    assert "heading free" in released["plan"] and released["reachable"]
+    # No posture change (those ask 3-8x the Panda's limits); the spline between the checked actions
+    # may ask a little more than they did, and the arm is slowed to the limits then (sim.joint_speed_cap).
+    assert released["max_joint_speed_ratio"] < 1.5 and released["ik_failures"] == 0
+    assert released["metrics"]["transferred"] >= 0.9 * scooped
