@@ -39,6 +39,11 @@ RECORD_COLUMNS: dict[str, str] = {
 }
 
 OUTCOME_COLUMNS = ("task_success", "spillage", "scoop_failure")
+# Where the lifted load (the particles `scooped` counts) was at the episode's end, each counted once:
+# in the target bowl, still in the spoon, back in the source bowl, counted spilled, anywhere else;
+# the five sum to `scooped` (grits_lab/evaluation/task_episode.py `load_account`). Records from
+# scoop-v11 on.
+LOAD_ACCOUNT = ("lifted_delivered", "lifted_in_spoon", "lifted_in_source", "lifted_spilled", "lifted_elsewhere")
 
 # Records written before the `protocol` column existed: those that carry the stage x cause spill
 # columns (`spilled_scoop_<cause>`, ...) were made by scoop-v4's code, which introduced them.

@@ -26,6 +26,7 @@ from grits_lab.evaluation.controllers import ObsHistory, is_still
 from grits_lab.evaluation.episode_scene import EpisodeScene
 from grits_lab.evaluation.transfer import Obstacle, choose_transfer, locate_bowl
 from grits_lab.geometry import cubic_pose_path
+from grits_lab.records import LOAD_ACCOUNT
 from grits_lab.sim.env import matrix_to_pose9
 
 if TYPE_CHECKING:  # annotations only: no import cost, no cycle
@@ -310,6 +311,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
     record_chunks = bool(getattr(config, "rollout_chunks", False))
     scoop = run_scoop(env, controller, scene, history, config.scoop, record_chunks=record_chunks)
     m = scoop["metrics"]
+    load = env.particle_counts().lifted.copy()  # the particles `scooped` counts, followed to the episode's end
     scoop_time = time.perf_counter() - start
     record: dict[str, Any] = {
         "n_particles": n_particles,
@@ -369,6 +371,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
     })
     record["delivered_fraction"] = transferred / int(m["scooped"]) if int(m["scooped"]) else math.nan
     record["sunk_below_table"] = int(final["sunk_below_table"])  # at the episode's end (ScoopEnv.metrics)
+    record.update(load_account(load, env.particle_counts(), env.tracker.spilled_flags))
     record.update(final["spill_attribution"])
     if record_chunks:
         n_exec = config.scoop.n_action_steps or getattr(controller, "n_action_steps", None) or 12
@@ -378,6 +381,23 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
             "food": food, "level": level, "seed": int(seed), "shape": food, "spilled": int(m["spilled"]),
             "scooped": int(m["scooped"]), "scoop_success": bool(m["scoop_success"])})
     return record
+
+
+def load_account(load: np.ndarray, counts: Any, spilled: np.ndarray) -> dict[str, int]:
+    """Where the particles of the lifted load (`load`, (N,) bool: lifted when the scoop ended) are at the
+    episode's end, each counted once, in this order: in the target bowl and out of the spoon
+    ("lifted_delivered"), still in the spoon ("lifted_in_spoon"), back in the source bowl
+    ("lifted_in_source": fell off the spoon over it, or never left it), counted spilled
+    ("lifted_spilled", `spilled` (N,) the tracker's flags), anywhere else ("lifted_elsewhere": resting
+    on a rim, say). The five sum to `scooped`. counts: the end's `ParticleCounts`."""
+    load = np.asarray(load, dtype=bool)
+    delivered = load & counts.in_target & ~counts.in_spoon
+    in_spoon = load & counts.in_spoon
+    in_source = load & counts.in_source & ~counts.in_spoon & ~delivered
+    lost = load & np.asarray(spilled, dtype=bool) & ~(delivered | in_spoon | in_source)
+    elsewhere = load & ~(delivered | in_spoon | in_source | lost)
+    return dict(zip(LOAD_ACCOUNT, (int(delivered.sum()), int(in_spoon.sum()), int(in_source.sum()), int(lost.sum()),
+                                   int(elsewhere.sum()))))
 
 
 def evaluation_episode(spec: EpisodeSpec, context: WorkerContext) -> dict[str, Any]:

@@ -13,6 +13,7 @@ from pathlib import Path
 import pandas as pd
 
 from grits_lab.intervals import format_rate, rate
+from grits_lab.records import LOAD_ACCOUNT
 from grits_lab.report.tables import ReportTable, all_variants
 from grits_lab.report.vocabulary import LEVEL_ORDER, food_display
 from grits_lab.sim.spill_metrics import SPILL_CAUSES, SPILL_STAGES, attribution_columns, stage_columns
@@ -127,22 +128,30 @@ def delivery_table(episodes: pd.DataFrame | None) -> ReportTable:
             after = spilled_after_scoop(g)
             r = rate(int(delivered.sum()), len(g))
             heap = pd.to_numeric(g["above_spoon_rim"], errors="coerce") if "above_spoon_rim" in g.columns else None
+            account = ({c: int(pd.to_numeric(g[c], errors="coerce").fillna(0).sum()) for c in LOAD_ACCOUNT}
+                       if set(LOAD_ACCOUNT) <= set(g.columns) else None)
             display_rows.append({"Method": name, "Food": food, "Level": level, "Episodes": str(len(g)),
                                  f"Delivered (>= {DELIVERED_SHARE:.0%}, no spill)": format_rate(r),
                                  "Mean share delivered": f"{share.mean():.0%}" if len(g) else "—",
                                  "Spill after the scoop": f"{int((after > 0).sum())}/{len(g)}",
-                                 "Mean lifted / above the rim": f"{scooped.mean():.1f} / {heap.mean():.1f}" if len(g) and heap is not None else "—"})
+                                 "Mean lifted / above the rim": f"{scooped.mean():.1f} / {heap.mean():.1f}" if len(g) and heap is not None else "—",
+                                 "Lifted: delivered / in spoon / in source / spilled / elsewhere":
+                                     " / ".join(str(account[c]) for c in LOAD_ACCOUNT) if account is not None else "—"})
             data_rows.append({"method": g["method"].iloc[0] if len(g) else "", "variant": variant, "method_name": name, "food": food,
                               "level": level, "episodes": len(g), "delivered_k": int(delivered.sum()),
                               "delivered_low": r.low, "delivered_high": r.high,
                               "mean_share_delivered": float(share.mean()) if len(g) else math.nan,
                               "spill_after_scoop_k": int((after > 0).sum()),
                               "mean_scooped": float(scooped.mean()) if len(g) else math.nan,
-                              "mean_above_spoon_rim": float(heap.mean()) if len(g) and heap is not None else math.nan})
+                              "mean_above_spoon_rim": float(heap.mean()) if len(g) and heap is not None else math.nan,
+                              **{c: account[c] if account is not None else math.nan for c in LOAD_ACCOUNT}})
     notes = [f"Episodes that lifted food (`scooped` > 0). Delivered: at least {DELIVERED_SHARE:.0%} of the lifted particles "
              "ended in the target bowl and none was spilled after the scoop (Wilson 95 % interval). A share above 100 % "
              "means food that was in the spoon below the source rim when the scoop was judged also arrived.",
-             "Mean lifted / above the rim: particles lifted, and those of them above the spoon's rim (the heap a carry can shed)."]
+             "Mean lifted / above the rim: particles lifted, and those of them above the spoon's rim (the heap a carry can shed).",
+             "Lifted: where the lifted particles were at the episode's end, summed over its episodes: in the target bowl, "
+             "still in the spoon after the pour, back in the source bowl, counted spilled, elsewhere (on a rim, say); "
+             "each particle once (records' lifted_* columns, docs/evaluation.md)."]
     return ReportTable("delivery", "Delivery after the scoop: how much of the lifted load reached the target bowl",
                        "Per method over the episodes that lifted food; per food and level for a run of one method.",
                        pd.DataFrame(display_rows), pd.DataFrame(data_rows), notes)

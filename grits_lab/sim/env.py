@@ -558,6 +558,11 @@ class ScoopEnv:
             "carry_peak_spoon_accel_mps2": self.carry_peak_spoon_accel,
         }
 
+    def particle_counts(self) -> Any:
+        """Where every particle is now (`spill_metrics.ParticleCounts`: per-particle masks of the spoon,
+        the bowls and what is lifted). RuntimeError before `reset`."""
+        return self._classify()
+
     # ---- internals ---------------------------------------------------------------------------
     def _home(self) -> np.ndarray:
         if self._home_joints is None:

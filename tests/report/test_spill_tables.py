@@ -54,6 +54,18 @@ def test_delivery_counts_episodes_that_bring_90_percent_of_the_load_and_spill_no
     assert per_food.loc["PE penne", "episodes"] == 1 and per_food.loc["SA sago", "delivered_k"] == 1
 
 
+def test_the_delivery_table_sums_where_the_lifted_load_ended():
+    run = _run([("expert", "sago", 20, 17, {}), ("expert", "sago", 10, 10, {})])
+    run["lifted_delivered"], run["lifted_in_spoon"], run["lifted_in_source"] = [17, 10], [1, 0], [2, 0]
+    run["lifted_spilled"], run["lifted_elsewhere"] = [0, 0], [0, 0]
+    table = delivery_table(run)
+    overall = table.data.iloc[0]
+    assert (overall["lifted_delivered"], overall["lifted_in_spoon"], overall["lifted_in_source"]) == (27, 1, 2)
+    assert table.display.iloc[0]["Lifted: delivered / in spoon / in source / spilled / elsewhere"] == "27 / 1 / 2 / 0 / 0"
+    older = delivery_table(_run([("expert", "sago", 20, 17, {})]))  # records before the columns existed
+    assert older.display.iloc[0]["Lifted: delivered / in spoon / in source / spilled / elsewhere"] == "—"
+
+
 def test_the_failure_table_splits_the_spills_after_the_scoop_by_stage():
     run = _run([("dp", "sago", 20, 18, {"spilled_carry_off_spoon": 2}),
                 ("dp", "sago", 20, 15, {"spilled_lift_off_spoon": 1, "spilled_pour_poured_outside": 4}),
