@@ -44,6 +44,7 @@ def benchmark_commands(full: bool) -> dict[str, list[str]]:
         "evaluation": [py, str(HERE / "bench_evaluation.py"), "--presets", *(["cpu", "paper"] if full else ["cpu"]),
                        "--repeats", "10" if full else "4", "--episodes", "4" if full else "2"],
         "sweep_pool": [py, str(HERE / "bench_sweep_pool.py"), "--trials", "6" if full else "3"],
+        "transfer_ik": [py, str(HERE / "bench_transfer_ik.py"), "--repeats", "5" if full else "3"],
         # needs a demonstration dataset: grits-lab collect experiments/demos_quick.yaml
         "data_parallel": [py, str(HERE / "bench_data_parallel.py"), "--steps", "300" if full else "100"],
     }
@@ -125,6 +126,10 @@ def headlines(name: str, result: dict) -> list[tuple[str, object]]:
         return [("sweep: overhead per trial, a pool per trial (s)", result.get("overhead_per_trial_before_s")),
                 ("sweep: overhead per trial, one pool per sweep (s)", result.get("overhead_per_trial_now_s")),
                 ("sweep: trial wall time, a pool per trial / one pool per sweep", result.get("ratio_trial_wall_before_over_now"))]
+    if name == "transfer_ik":
+        return [(f"transfer IK from the {start.replace('_', ' ')}: {key} (x PyBullet's solve)",
+                 result.get(start, {}).get(f"{key}_over_solve")) for start in ("wound_wrist", "rest_posture")
+                for key in ("refine_fine", "heading_free")]
     if name == "evaluation":
         rows = []
         for key, value in result.items():
