@@ -26,7 +26,6 @@ import sys
 import time
 from pathlib import Path
 
-from grits_lab.cli.flags import add_flag
 from grits_lab.io import write_text_atomic
 
 HERE = Path(__file__).resolve().parent
