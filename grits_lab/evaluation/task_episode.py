@@ -235,11 +235,16 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     max_step = settings.max_speed / env.config.control_hz
     # The robot's base stands at the world origin (grits_lab/sim/world.py): radial = away from it.
     heading = math.atan2(target.centre[1], target.centre[0]) if settings.heading == "radial" else None
-    check = ((lambda actions: env.check_path(actions, rest_pull=settings.rest_pull, touches=settings.avoid_arm_contact,
-                                             ik_refine=settings.ik_refine, stop_at_unreachable=settings.no_option == "hold"))
-             if settings.reach_check else None)
+    def check(actions: np.ndarray) -> Any:
+        # The very IK the motion will solve: along the spline through the actions and the holds after
+        # them, which shape its last span (their findings count against the last action).
+        holds = settings.settle_steps if settings.interpolation == "cubic" else 0
+        whole = np.concatenate([actions, np.repeat(actions[-1:], holds, axis=0)])
+        return env.check_path(whole, rest_pull=settings.rest_pull, touches=settings.avoid_arm_contact, ik_refine=settings.ik_refine,
+                              stop_at_unreachable=settings.no_option == "hold", interpolation=settings.interpolation).folded(len(actions))
+
     heading_free = env.heading_free_path if settings.reach_check and settings.heading_free_lift else None
-    plan = choose_transfer(current, target, obstacles, settings, max_step, reach, heading, check,
+    plan = choose_transfer(current, target, obstacles, settings, max_step, reach, heading, check if settings.reach_check else None,
                            spoon.pour_edge(settings.pour_axis), heading_free)
     ik_failures, joint_steps, speed_ratios = 0, [0.0], [0.0]
     spilled_by_stage: dict[str, int] = {}

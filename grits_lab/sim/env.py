@@ -18,7 +18,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from grits_lab.errors import InputError
-from grits_lab.geometry import matrix_to_rot6d, rot6d_to_matrix
+from grits_lab.geometry import cubic_pose_path, matrix_to_rot6d, rot6d_to_matrix
 from grits_lab.seeding import derive_seed, make_rng
 from grits_lab.sim.cameras import CameraImage, render
 from grits_lab.sim.sim_config import MAX_SOLVER_ITERATIONS, SimConfig
@@ -49,6 +49,21 @@ class PathCheck:
     # (T,) the arm (not the spoon) within ARM_CLEARANCE of the table or a bowl at the action's end;
     # None when the check was not asked for it
     touches: np.ndarray | None = None
+
+    def folded(self, n: int) -> "PathCheck":
+        """The check of the first `n` actions, what the later ones found folded into the n-th: it is
+        unreachable, touches or moves as fast as the fastest of them. For a motion checked with the
+        actions that follow it (a hold after a pour, which shapes the spline's last span)."""
+        if n >= len(self.unreachable):
+            return self
+        tail = slice(n - 1, None)
+        unreachable, steps, ratios = self.unreachable[:n].copy(), self.joint_steps[:n].copy(), self.speed_ratios[:n].copy()
+        unreachable[-1], steps[-1], ratios[-1] = self.unreachable[tail].any(), self.joint_steps[tail].max(), self.speed_ratios[tail].max()
+        touches = None
+        if self.touches is not None:
+            touches = self.touches[:n].copy()
+            touches[-1] = self.touches[tail].any()
+        return PathCheck(unreachable, steps, self.joints, ratios, touches)
 
     @property
     def n_checked(self) -> int:
@@ -395,7 +410,8 @@ class ScoopEnv:
             yield k, joints, ik.ok
 
     def check_path(self, path: np.ndarray, rest_pull: bool | None = None, touches: bool = False,
-                   ik_refine: bool | None = None, stop_at_unreachable: bool = False) -> PathCheck:
+                   ik_refine: bool | None = None, stop_at_unreachable: bool = False,
+                   interpolation: str = "linear") -> PathCheck:
         """What the arm would do with the actions `path` (T, 9) from its present joint target, on the
         kinematic copy only (the world is not touched): the same IK tracking as `step` (with
         `rest_pull` and `ik_refine` as `_track`: None the current stage's; pass the settings of the
@@ -405,12 +421,20 @@ class ScoopEnv:
         `stop_at_unreachable`, once an action after the first is unreachable the rest are reported
         unreachable (joint step 0) without solving them: enough to fail a path, and a path the
         arm cannot follow no longer costs a full IK refinement (`PandaKinematics.refine`) at every
-        piece after it. Raises RuntimeError before `reset`.
+        piece after it. interpolation: "linear", the pieces `step` solves (straight,
+        `SimConfig.ik_per_action` an action, to COARSE_IK); "cubic", those `step_along` solves for a
+        motion along `geometry.cubic_pose_path` through `path` from the pose last asked for (one a
+        physics step, to FINE_IK), as the stages after the scoop move with `transfer.interpolation:
+        cubic`: the check then solves the very IK the motion will. Raises RuntimeError before
+        `reset`; InputError for another interpolation.
         """
         self._require_world()
+        if interpolation not in ("linear", "cubic"):
+            raise InputError(f"interpolation must be linear or cubic, got {interpolation!r}")
         joints, start = self._joint_target.copy(), self._pose_target
         unreachable, steps, ratios, touching = [], [], [], []
         actions = np.asarray(path, dtype=np.float64).reshape(-1, 9)
+        spline = cubic_pose_path(matrix_to_pose9(start), actions, self.config.substeps) if interpolation == "cubic" else None
         for i, action in enumerate(actions):
             if stop_at_unreachable and i > 1 and unreachable[-1]:
                 rest = len(actions) - i
@@ -421,7 +445,11 @@ class ScoopEnv:
                 break
             target = pose9_to_matrix(action)
             before, failed = joints, False
-            for _, joints, reached in self._track(self._straight_pieces(start, target), joints, rest_pull, ik_refine=ik_refine):
+            if spline is None:
+                pieces, converged = self._straight_pieces(start, target), COARSE_IK
+            else:
+                pieces, converged = [pose9_to_matrix(x) for x in spline[i]], FINE_IK
+            for _, joints, reached in self._track(pieces, joints, rest_pull, converged=converged, ik_refine=ik_refine):
                 failed |= not reached
             start = target
             unreachable.append(failed)

@@ -11,6 +11,7 @@ from grits_lab.evaluation.episode_scene import EpisodeScene
 from grits_lab.evaluation.transfer import Obstacle, fit_circle, locate_bowl, path_is_clear, plan_transfer
 from grits_lab.perception.composite import CloudConfig
 from grits_lab.perception.env_clouds import builder_for_env
+from grits_lab.errors import InputError
 from grits_lab.sim import ScoopEnv, SimConfig
 
 REPO = Path(__file__).resolve().parents[2]
@@ -579,3 +580,42 @@ def test_the_load_account_puts_every_lifted_particle_in_exactly_one_place():
     assert account == {"lifted_delivered": 2, "lifted_in_spoon": 1, "lifted_in_source": 1, "lifted_spilled": 1,
                        "lifted_elsewhere": 1}
     assert sum(account.values()) == load.sum() and tuple(account) == LOAD_ACCOUNT
+
+
+def test_a_cubic_check_solves_the_very_ik_the_motion_along_the_spline_solves(env):
+    """`check_path(..., interpolation="cubic")` on the kinematic copy ends at the joint target the arm
+    is commanded to after moving along `cubic_pose_path` through the same actions with `step_along`,
+    exactly; the straight-piece check is another motion's prediction."""
+    import math
+
+    from grits_lab.evaluation.transfer import choose_transfer
+    from grits_lab.geometry import cubic_pose_path
+    from grits_lab.sim.env import matrix_to_pose9
+    from grits_lab.task.transfer_settings import TransferSettings
+
+    scene, target, obstacles = _scene_obstacles(env, (0.45, 0.3))
+    settings = TransferSettings()
+    plan = choose_transfer(matrix_to_pose9(scene.spoon_pose()), target, obstacles, settings, 0.012, 0.036,
+                           math.atan2(target.centre[1], target.centre[0]), check=None)
+    actions = plan.actions[:40]  # the lift and the start of the carry
+    env.anchor_pose_target()
+    env.set_stage("lift", rest_pull=False, ik_refine=True)
+    cubic = env.check_path(actions, interpolation="cubic")
+    linear = env.check_path(actions)
+    for poses in cubic_pose_path(matrix_to_pose9(env.pose_target), actions, env.config.substeps):
+        env.step_along(poses)
+    assert np.array_equal(cubic.joints, env._joint_target)
+    assert not np.array_equal(linear.joints, env._joint_target)
+    with pytest.raises(InputError, match="interpolation"):
+        env.check_path(actions, interpolation="spline")
+
+
+def test_a_folded_check_counts_what_the_holds_after_a_motion_found_against_its_last_action():
+    from grits_lab.sim.env import PathCheck
+
+    answer = PathCheck(np.array([False, False, False, True]), np.array([0.1, 0.2, 0.05, 0.3]), np.zeros(7),
+                       np.array([0.4, 0.9, 0.2, 1.3]), np.array([False, False, False, False]))
+    folded = answer.folded(2)
+    assert folded.unreachable.tolist() == [False, True] and folded.speed_ratios.tolist() == [0.4, 1.3]
+    assert folded.joint_steps.tolist() == [0.1, 0.3] and folded.touches.tolist() == [False, False]
+    assert answer.folded(4) is answer
