@@ -398,7 +398,8 @@ def load_account(load: np.ndarray, counts: Any, spilled: np.ndarray) -> dict[str
     load = np.asarray(load, dtype=bool)
     delivered = load & counts.in_target & ~counts.in_spoon
     in_spoon = load & counts.in_spoon
-    in_source = load & counts.in_source & ~counts.in_spoon & ~delivered
+    # in the source bowl's cylinder and inside its wall: under the flared rim, on the table, is outside
+    in_source = load & counts.in_source & ~counts.outside_source & ~counts.in_spoon & ~delivered
     lost = load & np.asarray(spilled, dtype=bool) & ~(delivered | in_spoon | in_source)
     elsewhere = load & ~(delivered | in_spoon | in_source | lost)
     return dict(zip(LOAD_ACCOUNT, (int(delivered.sum()), int(in_spoon.sum()), int(in_source.sum()), int(lost.sum()),

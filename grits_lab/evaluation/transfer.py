@@ -353,8 +353,9 @@ def option_motion(current: np.ndarray, target: BowlEstimate, obstacles: list[Obs
     from the spoon's centre to the edge the food leaves by (its -y lip for `settings.pour_axis`
     "roll", its tip for "tip"); with `settings.pour_lip_over_centre` that edge pours over the
     target's centre. heading_free: how the arm lifts with its heading free, needed by an option
-    with `heading_free` (ValueError without it): its lift is the planned one with each pose's
-    heading as the arm leaves it, and the carry starts from where that lift ends."""
+    with `heading_free` (ValueError without it): its lift is the poses the arm reaches holding the
+    planned lift's centre and tilt with its heading left free (`ScoopEnv.heading_free_path`), and
+    the carry starts from where that lift ends."""
     lip_offset = pour_edge if settings.pour_lip_over_centre else 0.0
     if target_heading is not None:
         target_heading += math.radians(option.pour_yaw_deg)
@@ -397,21 +398,36 @@ def choose_transfer(current: np.ndarray, target: BowlEstimate, obstacles: list[O
     heading_free (with `check`): when no option passes, the heading-free options
     (`transfer_options(settings, heading_free=True)`, their lifts from this callable, see
     `option_motion`) are tried in the same way, with `settings.max_checks` checks of their own. A
-    heading-free lift the arm did not reach fails without a check. Every motion an option with the
-    scoop's heading passes is therefore chosen as without them.
+    heading-free lift the arm did not reach, or whose carry would cross an obstacle, fails without a
+    check; each lift is solved once for all its pours. Every motion an option with the scoop's
+    heading passes is therefore chosen as without them.
     """
     best: tuple[tuple[float, int], TransferPlan] | None = None
     n_checks = 0
     families = [transfer_options(settings)]
     if heading_free is not None and check is not None:
         families.append(transfer_options(settings, heading_free=True))
+        lifted: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}  # one heading-free lift per planned lift, whatever the pour
+
+        def heading_free_once(lift: np.ndarray, solve: HeadingFreeLift = heading_free) -> tuple[np.ndarray, np.ndarray]:
+            key = np.ascontiguousarray(lift).tobytes()
+            if key not in lifted:
+                lifted[key] = solve(lift)
+            return lifted[key]
+
+        heading_free = heading_free_once
     for options in families:
         failed_lift, family_checks = None, 0
         for option in options:
             if failed_lift == (option.level_steps, option.level_yaw_deg):
                 continue
-            actions, stages, lift_reached = option_motion(current, target, obstacles, settings, max_step, spoon_reach,
-                                                          target_heading, option, pour_edge, heading_free)
+            try:
+                actions, stages, lift_reached = option_motion(current, target, obstacles, settings, max_step, spoon_reach,
+                                                              target_heading, option, pour_edge, heading_free)
+            except InputError:
+                if not option.heading_free:
+                    raise
+                continue  # a carry from where this lift ends would cross an obstacle: the option fails
             if check is None:
                 return TransferPlan(actions, stages, option, reachable=True, n_checks=0)
             if not lift_reached:  # the arm cannot lift with its heading free: no motion to check

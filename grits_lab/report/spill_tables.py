@@ -128,8 +128,10 @@ def delivery_table(episodes: pd.DataFrame | None) -> ReportTable:
             after = spilled_after_scoop(g)
             r = rate(int(delivered.sum()), len(g))
             heap = pd.to_numeric(g["above_spoon_rim"], errors="coerce") if "above_spoon_rim" in g.columns else None
-            account = ({c: int(pd.to_numeric(g[c], errors="coerce").fillna(0).sum()) for c in LOAD_ACCOUNT}
-                       if set(LOAD_ACCOUNT) <= set(g.columns) else None)
+            # Only where every episode of the group has the account: a partial sum would look whole.
+            account = ({c: int(pd.to_numeric(g[c], errors="coerce").sum()) for c in LOAD_ACCOUNT}
+                       if set(LOAD_ACCOUNT) <= set(g.columns) and len(g)
+                       and pd.to_numeric(g[list(LOAD_ACCOUNT)].stack(future_stack=True), errors="coerce").notna().all() else None)
             display_rows.append({"Method": name, "Food": food, "Level": level, "Episodes": str(len(g)),
                                  f"Delivered (>= {DELIVERED_SHARE:.0%}, no spill)": format_rate(r),
                                  "Mean share delivered": f"{share.mean():.0%}" if len(g) else "—",

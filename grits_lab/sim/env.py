@@ -24,7 +24,7 @@ from grits_lab.sim.cameras import CameraImage, render
 from grits_lab.sim.sim_config import MAX_SOLVER_ITERATIONS, SimConfig
 from grits_lab.sim.foods import FoodSpec, level_count, load_foods, sample_particles
 from grits_lab.sim.spill_metrics import COVERAGE_THRESHOLD, SpillTracker, above_spoon_rim, classify, fill_height, spoon_coverage
-from grits_lab.sim.robot import COARSE_IK, FINE_IK, LIMIT_AVOID_STEP, REST_POSE, IKConvergence, PandaKinematics, joint_speed_ratio, pose_to_matrix, slowed_steps, spoon_in_hand
+from grits_lab.sim.robot import COARSE_IK, FINE_IK, HEADING_FREE_TOLERANCE, LIMIT_AVOID_STEP, REST_POSE, IKConvergence, PandaKinematics, joint_speed_ratio, pose_to_matrix, slowed_steps, spoon_in_hand
 from grits_lab.sim.shapes import TARGET_BOWL, BowlGeometry, SpoonGeometry
 from grits_lab.sim.world import TABLE_TOP, World, build_static_scene, build_world, settle
 
@@ -465,20 +465,20 @@ class ScoopEnv:
         present joint target holding each one's spoon centre and tilt but not its heading about the
         world's vertical, its joints stepping away from their limits in the larger null space that
         leaves (`PandaKinematics.solve_heading_free`, at most `limit_step` rad per action), on the
-        kinematic copy only; and (T,) whether each was reached: its centre and tilt within the IK
-        tolerance (`SimConfig.ik_position_tolerance`, `ik_orientation_tolerance`). A spoon turned
+        kinematic copy only; and (T,) whether each was reached: its centre within 1 mm and its tilt
+        within 0.01 rad (`HEADING_FREE_TOLERANCE`; the lift's actions are the poses reached, so a
+        looser answer would tip the loaded spoon by its miss, and the level carry after it would
+        turn it back in one action). A spoon turned
         about the vertical through its centre keeps its load where it is, so the poses are a motion
         of the same spoon with its wrist unwound. RuntimeError before `reset`."""
         self._require_world()
-        cfg = self.config
         pivot = np.linalg.inv(self._hand_in_spoon)[:3, 3]
         joints, poses, reached = self._joint_target.copy(), [], []
         for action in np.asarray(path, dtype=np.float64).reshape(-1, 9):
             joints, residual = self.kinematics.solve_heading_free(pose9_to_matrix(action) @ self._hand_in_spoon, joints, pivot,
                                                                   limit_step=limit_step)
             poses.append(matrix_to_pose9(self.kinematics.forward(joints) @ np.linalg.inv(self._hand_in_spoon)))
-            reached.append(float(np.linalg.norm(residual[:3])) <= cfg.ik_position_tolerance
-                           and float(np.linalg.norm(residual[3:])) <= cfg.ik_orientation_tolerance)
+            reached.append(HEADING_FREE_TOLERANCE.reached(float(np.linalg.norm(residual[:3])), float(np.linalg.norm(residual[3:]))))
         return np.array(poses, dtype=np.float32), np.array(reached, dtype=bool)
 
     @staticmethod

@@ -109,6 +109,9 @@ class IKConvergence:
 # jitter at 120 Hz.
 COARSE_IK = IKConvergence(1e-4, 1e-3, attempts=4)
 FINE_IK = IKConvergence(1e-6, 1e-5, attempts=8)
+# A heading-free lift's action counts as reached (`ScoopEnv.heading_free_path`) within 1 mm of its
+# centre and 0.01 rad of its tilt (`attempts` unused).
+HEADING_FREE_TOLERANCE = IKConvergence(1e-3, 1e-2, attempts=1)
 
 
 class PandaKinematics:
@@ -199,9 +202,10 @@ class PandaKinematics:
         dimensional: the pivot's position and where the world's vertical lies in the grasp frame
         (the tilt, two angles); a rotation about the world's vertical through the pivot changes
         neither. The arm's seven joints then leave a two-dimensional null space instead of one,
-        and the solver spends it on moving away from the joint limits: first one step of at most
-        `limit_step` rad down the gradient of H(q) = sum_j ((q_j - mid_j) / range_j)^2, projected
-        onto the task's null space (Liegeois 1977), then damped least squares on the five task rows
+        and the solver spends it on moving away from the joint limits: first one step down the
+        gradient of H(q) = sum_j ((q_j - mid_j) / range_j)^2 / 2, projected onto the task's null
+        space (Liegeois 1977), with unit gain and no joint moved more than `limit_step` rad (so the
+        step vanishes where H is least on the null space), then damped least squares on the five task rows
         (`refine`'s iteration, Wampler 1986) until the residual is within `converged` or after
         `iterations`. Every iterate is clipped to the joint limits."""
         lower, upper = np.asarray(self.lower[:7]), np.asarray(self.upper[:7])
@@ -224,9 +228,8 @@ class PandaKinematics:
         if limit_step > 0:
             _, rows = task(q)
             inverse = rows.T @ np.linalg.inv(rows @ rows.T + DLS_DAMPING**2 * np.eye(5))
-            away = -(np.eye(7) - inverse @ rows) @ ((q - mid) / span**2)
-            if np.abs(away).max() > 1e-12:
-                q = np.clip(q + away * (limit_step / float(np.abs(away).max())), lower, upper)
+            away = -(np.eye(7) - inverse @ rows) @ ((q - mid) / span**2)  # rad per unit gain: vanishes at the optimum
+            q = np.clip(q + away * min(1.0, limit_step / max(float(np.abs(away).max()), 1e-12)), lower, upper)
         for _ in range(iterations):
             e, rows = task(q)
             if converged.reached(float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))):

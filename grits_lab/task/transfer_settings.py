@@ -76,7 +76,8 @@ class TransferSettings:
     # turned by `alternative_level_yaw_deg`, the pour from `alternative_pour_heights` and moved
     # `alternative_pour_offsets` metres away from the robot's base (negative: towards it), turned by
     # `alternative_pour_yaw_deg`.
-    # At most `max_checks` options (about 1 s each on one core, more when slowed).
+    # At most `max_checks` options (a few seconds each on one core with `interpolation: cubic`, which
+    # checks the spline's pieces one a physics step; more when slowed).
     reach_check: bool = True
     # The IK's null-space pull towards the arm's rest posture in these stages. Off: the arm follows
     # the path with the least joint motion; on (as in the scoop, and in the transfer before its

@@ -557,9 +557,8 @@ def test_a_lift_the_scoop_left_unreachable_with_its_heading_is_followed_with_the
     assert outcomes[False]["plan"].startswith("held") and outcomes[False]["metrics"]["transferred"] == 0
     released = outcomes[True]
     assert "heading free" in released["plan"] and released["reachable"]
-    # No posture change (those ask 3-8x the Panda's limits); the spline between the checked actions
-    # may ask a little more than they did, and the arm is slowed to the limits then (sim.joint_speed_cap).
-    assert released["max_joint_speed_ratio"] < 1.5 and released["ik_failures"] == 0
+    # The check solved the motion's own IK and slowed it to the Panda's limits: so did the motion.
+    assert released["max_joint_speed_ratio"] <= 1.0 + 1e-6 and released["ik_failures"] == 0
     assert released["metrics"]["transferred"] >= 0.9 * scooped
 
 
@@ -569,15 +568,16 @@ def test_the_load_account_puts_every_lifted_particle_in_exactly_one_place():
     from grits_lab.sim.spill_metrics import ParticleCounts
 
     # particles: delivered, in the spoon over the target, back in the source bowl, on the table,
-    # on a rim, in the target but never lifted, and one lifted and delivered that once was counted spilled
+    # on a rim, in the target but never lifted, one lifted and delivered that once was counted
+    # spilled, and one on the table under the source's flared rim (inside its cylinder, outside its wall)
     f, t = False, True
-    counts = ParticleCounts(in_spoon=np.array([f, t, f, f, f, f, f]), in_target=np.array([t, t, f, f, f, t, t]),
-                            outside_source=np.array([t, t, f, t, t, t, t]), lifted=np.zeros(7, bool),
-                            in_source=np.array([f, f, t, f, f, f, f]))
-    load = np.array([t, t, t, t, t, f, t])
-    spilled = np.array([f, f, f, t, f, f, t])
+    counts = ParticleCounts(in_spoon=np.array([f, t, f, f, f, f, f, f]), in_target=np.array([t, t, f, f, f, t, t, f]),
+                            outside_source=np.array([t, t, f, t, t, t, t, t]), lifted=np.zeros(8, bool),
+                            in_source=np.array([f, f, t, f, f, f, f, t]))
+    load = np.array([t, t, t, t, t, f, t, t])
+    spilled = np.array([f, f, f, t, f, f, t, t])
     account = load_account(load, counts, spilled)
-    assert account == {"lifted_delivered": 2, "lifted_in_spoon": 1, "lifted_in_source": 1, "lifted_spilled": 1,
+    assert account == {"lifted_delivered": 2, "lifted_in_spoon": 1, "lifted_in_source": 1, "lifted_spilled": 2,
                        "lifted_elsewhere": 1}
     assert sum(account.values()) == load.sum() and tuple(account) == LOAD_ACCOUNT
 
