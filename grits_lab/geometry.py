@@ -118,12 +118,17 @@ def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return axis / s * math.atan2(s, c)
 
 
+def skew(v: np.ndarray) -> np.ndarray:
+    """(3, 3) the cross-product matrix of `v` (3,): skew(v) @ u == np.cross(v, u)."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
 def axis_angle_matrix(axis: np.ndarray, angles: np.ndarray | float) -> np.ndarray:
     """(..., 3, 3) rotations by `angles` (radians) about one unit `axis` (3,), by Rodrigues' formula."""
     k = np.asarray(axis, dtype=np.float64)
     k = k / np.linalg.norm(k)
     a = np.asarray(angles, dtype=np.float64)[..., None, None]
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    K = skew(k)
     return np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * (K @ K)
 
 

@@ -165,6 +165,7 @@ class ScoopEnv:
         self.world: World | None = None
         self.spoon_geometry = SpoonGeometry()
         self._hand_in_spoon = spoon_in_hand(self.spoon_geometry)
+        self._spoon_in_grasp = np.linalg.inv(self._hand_in_spoon)
         self._home_joints: np.ndarray | None = None
         self._seed_stream: np.random.Generator | None = None
 
@@ -368,7 +369,7 @@ class ScoopEnv:
         the pose asked for lay elsewhere, and the next action's path would start from there. The
         stages after the scoop start with it (`run_transfer`). RuntimeError before `reset`."""
         self._require_world()
-        self._pose_target = self.kinematics.forward(self._joint_target) @ np.linalg.inv(self._hand_in_spoon)
+        self._pose_target = self._spoon_pose_at(self._joint_target)
 
     def set_solver_iterations(self, iterations: int | None, ramp_steps: int = 0) -> None:
         """Constraint-solver iterations per physics step from now on (PyBullet's
@@ -472,12 +473,12 @@ class ScoopEnv:
         about the vertical through its centre keeps its load where it is, so the poses are a motion
         of the same spoon with its wrist unwound. RuntimeError before `reset`."""
         self._require_world()
-        pivot = np.linalg.inv(self._hand_in_spoon)[:3, 3]
+        pivot = self._spoon_in_grasp[:3, 3]
         joints, poses, reached = self._joint_target.copy(), [], []
         for action in np.asarray(path, dtype=np.float64).reshape(-1, 9):
             joints, residual = self.kinematics.solve_heading_free(pose9_to_matrix(action) @ self._hand_in_spoon, joints, pivot,
                                                                   limit_step=limit_step)
-            poses.append(matrix_to_pose9(self.kinematics.forward(joints) @ np.linalg.inv(self._hand_in_spoon)))
+            poses.append(matrix_to_pose9(self._spoon_pose_at(joints)))
             reached.append(HEADING_FREE_TOLERANCE.reached(float(np.linalg.norm(residual[:3])), float(np.linalg.norm(residual[3:]))))
         return np.array(poses, dtype=np.float32), np.array(reached, dtype=bool)
 
@@ -592,6 +593,10 @@ class ScoopEnv:
         return self._classify()
 
     # ---- internals ---------------------------------------------------------------------------
+    def _spoon_pose_at(self, joints: np.ndarray) -> np.ndarray:
+        """(4, 4) the spoon pose the arm at joints (7,) holds (forward kinematics on the kinematic copy)."""
+        return self.kinematics.forward(joints) @ self._spoon_in_grasp
+
     def _home(self) -> np.ndarray:
         if self._home_joints is None:
             home = pose_to_matrix(np.array(self.config.spoon_home[:3]), np.array(self.config.spoon_home[3:]))

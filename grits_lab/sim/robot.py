@@ -16,7 +16,7 @@ import pybullet as pb
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
 
-from grits_lab.geometry import matrix_to_quat, quat_to_matrix, rotation_between, rotation_vector
+from grits_lab.geometry import matrix_to_quat, quat_to_matrix, rotation_between, rotation_vector, skew
 from grits_lab.sim.bullet import connect_direct
 from grits_lab.sim.shapes import SpoonGeometry
 
@@ -57,6 +57,14 @@ def slowed_steps(joint_step: np.ndarray, steps: int, time_step: float, cap: floa
         return steps
     needed = joint_speed_ratio(joint_step, 1.0 / (float(cap) * float(time_step)))  # physics steps at the capped limits
     return max(int(steps), int(math.ceil(needed - 1e-9)))
+
+
+def dls_step(rows: np.ndarray, error: np.ndarray, joints: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Joints (7,) one damped least-squares iteration from `joints` along a task's Jacobian rows (K, 7)
+    towards its error (K,): dq = J^T (J J^T + DLS_DAMPING^2 I)^-1 e, scaled so that no joint moves
+    more than DLS_MAX_STEP rad, clipped to the joint limits `lower`, `upper` (7,)."""
+    dq = rows.T @ np.linalg.solve(rows @ rows.T + DLS_DAMPING**2 * np.eye(len(rows)), error)
+    return np.clip(joints + dq * min(1.0, DLS_MAX_STEP / max(float(np.abs(dq).max()), 1e-12)), lower, upper)
 
 
 def pose_to_matrix(position: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:
@@ -186,9 +194,7 @@ class PandaKinematics:
             e = self.residual(target, q)
             if converged.reached(float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))):
                 break
-            jac = self.jacobian(q)
-            dq = jac.T @ np.linalg.solve(jac @ jac.T + DLS_DAMPING**2 * np.eye(6), e)
-            q = np.clip(q + dq * min(1.0, DLS_MAX_STEP / max(float(np.abs(dq).max()), 1e-12)), lower, upper)
+            q = dls_step(self.jacobian(q), e, q, lower, upper)
         return q
 
     def solve_heading_free(self, target: np.ndarray, seed_joints: np.ndarray, pivot: np.ndarray,
@@ -220,8 +226,7 @@ class PandaKinematics:
             w = reached[:3, :3] @ up_in_grasp  # where the target's vertical lies now; held, it is the world's
             tilt = rotation_between(w, np.array([0.0, 0.0, 1.0]))
             jac = self.jacobian(q)
-            skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
-            rows = np.vstack([jac[:3] - skew @ jac[3:], jac[3:5]])  # the pivot's velocity; tilting about world x, y
+            rows = np.vstack([jac[:3] - skew(r) @ jac[3:], jac[3:5]])  # the pivot's velocity; tilting about world x, y
             return np.concatenate([goal - (reached[:3, 3] + r), tilt[:2]]), rows
 
         q = np.clip(np.asarray(seed_joints, dtype=np.float64)[:7], lower, upper)
@@ -233,11 +238,9 @@ class PandaKinematics:
         for _ in range(iterations):
             e, rows = task(q)
             if converged.reached(float(np.linalg.norm(e[:3])), float(np.linalg.norm(e[3:]))):
-                break
-            dq = rows.T @ np.linalg.solve(rows @ rows.T + DLS_DAMPING**2 * np.eye(5), e)
-            q = np.clip(q + dq * min(1.0, DLS_MAX_STEP / max(float(np.abs(dq).max()), 1e-12)), lower, upper)
-        e, _ = task(q)
-        return q, e
+                return q, e
+            q = dls_step(rows, e, q, lower, upper)
+        return q, task(q)[0]
 
     def solve(self, target: np.ndarray, seed_joints: np.ndarray, pos_tol: float, rot_tol: float, rest_pull: bool = True,
               converged: IKConvergence = COARSE_IK, refine: bool = False) -> IKResult:
