@@ -21,6 +21,7 @@ from grits_lab.sim.sim_config import SimConfig
 from grits_lab.sim.foods import SampledParticles
 from grits_lab.sim.robot import (
     ARM_FORCES,
+    ARM_POSITION_GAIN_PER_S,
     ARM_JOINTS,
     FINGER_JOINTS,
     LAST_LINK_ON_TABLE,
@@ -111,11 +112,13 @@ class World:
 
     def command_joints(self, joints: np.ndarray, velocities: np.ndarray | None = None) -> None:
         """Joint position targets (7,) rad for the arm's motors, with velocity targets (7,) rad/s
-        (None: zero, the motors brake towards the target)."""
+        (None: zero, the motors brake towards the target); the position gain is the same per second
+        at every time step (`ARM_POSITION_GAIN_PER_S`)."""
+        gain = ARM_POSITION_GAIN_PER_S * self.config.time_step
         self.client.setJointMotorControlArray(
             self.robot, list(ARM_JOINTS), pb.POSITION_CONTROL, targetPositions=[float(q) for q in joints],
             targetVelocities=[0.0] * 7 if velocities is None else [float(v) for v in velocities],
-            forces=list(ARM_FORCES), positionGains=[0.3] * 7,
+            forces=list(ARM_FORCES), positionGains=[gain] * 7,
         )
 
     def arm_touches_static(self) -> bool:

@@ -276,3 +276,39 @@ def test_step_along_the_straight_pieces_is_step(env):
     for bad in (np.zeros((0, 9)), np.zeros((env.config.substeps + 1, 9)), np.full((2, 9), np.nan), np.zeros((2, 7))):
         with pytest.raises(InputError, match="poses must be finite"):
             env.step_along(bad)
+
+
+def joint_recovery(time_step: float, gain_per_s: float, monkeypatch) -> np.ndarray:
+    """Joint 4's angle change (rad) every 1/120 s over 0.1 s after its target is set 0.05 rad away."""
+    import grits_lab.sim.world as world_module
+
+    monkeypatch.setattr(world_module, "ARM_POSITION_GAIN_PER_S", gain_per_s)
+    env = ScoopEnv(SimConfig(time_step=time_step))
+    try:
+        env.reset(seed=0, options={"food": "soybeans", "n_particles": 0})
+        w = env.world
+        start = np.array([w.client.getJointState(w.robot, j)[0] for j in range(7)])
+        target = start.copy()
+        target[3] += 0.05
+        angles = []
+        for _ in range(int(round(0.1 / time_step))):
+            w.command_joints(target)
+            w.step(1)
+            angles.append(w.client.getJointState(w.robot, 3)[0] - start[3])
+        every = int(round((1.0 / 120.0) / time_step))
+        return np.array(angles)[every - 1::every]
+    finally:
+        env.close()
+
+
+def test_the_motors_position_gain_is_one_law_per_second_at_every_time_step(monkeypatch):
+    from grits_lab.sim.robot import ARM_POSITION_GAIN_PER_S
+
+    assert ARM_POSITION_GAIN_PER_S * (1.0 / 120.0) == 0.3  # the per-step gain every dataset was made with
+    coarse = joint_recovery(1 / 120, ARM_POSITION_GAIN_PER_S, monkeypatch)
+    fine = joint_recovery(1 / 240, ARM_POSITION_GAIN_PER_S, monkeypatch)
+    per_step = joint_recovery(1 / 240, 0.3 * 240, monkeypatch)  # 0.3 a step at half the step: twice as stiff
+    assert coarse[-1] == pytest.approx(0.05, abs=0.003) and fine[-1] == pytest.approx(0.05, abs=0.003)
+    # At half the step the joint follows the same law in seconds, where a gain fixed per step would
+    # pull it in faster.
+    assert np.abs(fine - coarse).mean() < 0.8 * np.abs(per_step - coarse).mean()
