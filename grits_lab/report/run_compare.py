@@ -19,19 +19,22 @@ from grits_lab.errors import InputError
 from grits_lab.io import write_text_atomic
 from grits_lab.markdown import markdown_table
 from grits_lab.report.run_records import load_run
-from grits_lab.report.spill_tables import has_attribution, spilled_after_scoop
+from grits_lab.report.spill_tables import delivered_share, has_attribution, spilled_after_scoop
 from grits_lab.report.vocabulary import method_display
 
 PAIR_KEYS = ("method", "food", "level", "trial")
 COMPARISON_FILE = "comparison.csv"
 # What the scoop ended with: equal in both runs means the scoop was not changed.
 SCOOP_COLUMNS = ("scooped", "spilled", "scoop_success", "scoop_steps")
-# Outcome -> its name in the table. spill_after_scoop: a particle lost in the lift, carry, pour or after it.
+# Outcome -> its name in the table. spill_after_scoop: a particle lost in the lift, carry, pour or after it;
+# lifted_food_delivered: food lifted and at least DELIVERED_SHARE of it in the target bowl with nothing
+# spilled after the scoop (the oracle's goal, spill_tables.delivered_share).
 PAIRED_OUTCOMES = {
     "task_success": "task success",
     "spillage": "spill during the scoop",
     "spill_after_scoop": "spill after the scoop",
     "scoop_failure": "scoop failure",
+    "lifted_food_delivered": "lifted food delivered",
 }
 
 
@@ -58,11 +61,21 @@ def _episodes(run_dir: str | Path) -> pd.DataFrame:
         row = frame[twice].iloc[0]
         raise InputError(f"{run_dir}: {int(twice.sum())} records share their episode, e.g. {row['method']} {row['food']}/{row['level']} "
                          f"trial {row['trial']} (a method at several guidance settings or predictors); compare runs of one setting each")
-    frame = frame.copy()
     if not has_attribution(frame):
         raise InputError(f"{run_dir}: the records predate the per-stage spill columns (`spilled_<stage>_<cause>`); "
                          "compare runs of scoop-v4 or later")
+    return with_paired_outcomes(frame)
+
+
+def with_paired_outcomes(frame: pd.DataFrame) -> pd.DataFrame:
+    """A copy of normalized records (`run_records.normalize_records`, with the attribution columns)
+    with the outcomes `PAIRED_OUTCOMES` names that the records do not hold themselves:
+    `spill_after_scoop` and `lifted_food_delivered` (False for an episode that lifted nothing or
+    ended with an error)."""
+    frame = frame.copy()
     frame["spill_after_scoop"] = spilled_after_scoop(frame) > 0
+    lifted = (pd.to_numeric(frame["scooped"], errors="coerce") > 0) & ~frame["is_error"].astype(bool)
+    frame["lifted_food_delivered"] = lifted & delivered_share(frame)[1].fillna(False).astype(bool)
     return frame
 
 
@@ -111,11 +124,12 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
 def comparison_markdown(table: pd.DataFrame) -> str:
     """The comparison (`compare_run_dirs`'s table, which names its runs) as a Markdown table with its caption."""
     before, after = str(table["before"].iloc[0]), str(table["after"].iloc[0])
-    head = ["Method", "Paired", "Scoop equal"] + [name for name in PAIRED_OUTCOMES.values()]
+    outcomes = [o for o in PAIRED_OUTCOMES if f"{o}_before" in table.columns]  # a comparison written before an outcome existed lacks it
+    head = ["Method", "Paired", "Scoop equal"] + [PAIRED_OUTCOMES[o] for o in outcomes]
     rows = []
     for _, row in table.iterrows():
         cells = [method_display(row["method"]), str(row["paired"]), f"{row['scoop_equal']}/{row['paired']}"]
-        for outcome in PAIRED_OUTCOMES:
+        for outcome in outcomes:
             cells.append(f"{row[f'{outcome}_before']} → {row[f'{outcome}_after']} "
                          f"(−{row[f'{outcome}_only_before']} +{row[f'{outcome}_only_after']}, p {row[f'{outcome}_p']:.2g})")
         rows.append(cells)

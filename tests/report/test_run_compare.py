@@ -7,18 +7,21 @@ import pytest
 
 from grits_lab.cli import main
 from grits_lab.errors import InputError
-from grits_lab.report.run_compare import compare_runs, paired_episodes, sign_test_p
+from grits_lab.report.run_compare import compare_runs, comparison_markdown, paired_episodes, sign_test_p, with_paired_outcomes
 from grits_lab.report.run_records import normalize_records
 from grits_lab.sim.spill_metrics import attribution_columns
 from tests.report.synthetic_records import episode
 
 
-def _run(outcomes: list[tuple[str, int, int]], tmp_path, name: str) -> pd.DataFrame:
-    """dp episodes on sago/low, trials 0.., each (outcome, scoop_steps, particles lost in the carry)."""
+def _run(outcomes: list[tuple], tmp_path, name: str) -> pd.DataFrame:
+    """dp episodes on sago/low, trials 0.., each (outcome, scoop_steps, particles lost in the carry[,
+    particles in the target bowl])."""
     rows = []
-    for trial, (outcome, steps, carry) in enumerate(outcomes):
+    for trial, (outcome, steps, carry, *transferred) in enumerate(outcomes):
         row = episode("dp", "sago", "low", trial, outcome)
         row.update({c: 0 for c in attribution_columns()}, scoop_steps=steps, spilled_carry_off_spoon=carry)
+        if transferred:
+            row["transferred"] = transferred[0]
         rows.append(row)
     frame = pd.DataFrame(rows)
     (tmp_path / name).mkdir()
@@ -36,8 +39,7 @@ def test_the_sign_test_is_the_exact_binomial_tail():
 def test_paired_episodes_count_equal_scoops_and_outcomes_changed_either_way(tmp_path, capsys):
     before = _run([("success", 40, 0), ("transfer_fail", 40, 2), ("transfer_fail", 40, 1), ("spill", 40, 0)], tmp_path, "before")
     after = _run([("success", 40, 0), ("success", 40, 0), ("transfer_fail", 40, 1), ("spill", 41, 0)], tmp_path, "after")
-    table = compare_runs(normalize_records(before).assign(spill_after_scoop=lambda f: f["spilled_carry_off_spoon"] > 0),
-                         normalize_records(after).assign(spill_after_scoop=lambda f: f["spilled_carry_off_spoon"] > 0))
+    table = compare_runs(with_paired_outcomes(normalize_records(before)), with_paired_outcomes(normalize_records(after)))
     row = table.set_index("method").loc["dp"]
     assert row["paired"] == 4 and row["scoop_equal"] == 3  # trial 3's scoop took one action more
     assert (row["task_success_before"], row["task_success_after"]) == (1, 2)
@@ -47,6 +49,22 @@ def test_paired_episodes_count_equal_scoops_and_outcomes_changed_either_way(tmp_
     out = capsys.readouterr().out
     assert "| Diffusion Policy | 4 | 3/4 | 1 → 2 (−0 +1, p 1) |" in out
     assert (tmp_path / "cmp" / "comparison.csv").is_file() and (tmp_path / "cmp" / "comparison.md").is_file()
+
+
+def test_lifted_food_delivered_needs_nine_tenths_in_the_target_bowl_and_no_spill_after_the_scoop(tmp_path):
+    # 20 lifted each (synthetic_records): 18 delivered is 90 %, 17 is not; a carry loss fails it; nothing lifted fails it.
+    before = _run([("success", 40, 0, 18), ("success", 40, 0, 17), ("success", 40, 1, 20), ("scoop_fail", 40, 0, 0)], tmp_path, "b")
+    after = _run([("success", 40, 0, 18), ("success", 40, 0, 18), ("success", 40, 0, 20), ("scoop_fail", 40, 0, 0)], tmp_path, "a")
+    delivered = with_paired_outcomes(normalize_records(before))["lifted_food_delivered"].tolist()
+    assert delivered == [True, False, False, False]
+    table = compare_runs(with_paired_outcomes(normalize_records(before)), with_paired_outcomes(normalize_records(after)))
+    row = table.set_index("method").loc["dp"]
+    assert (row["lifted_food_delivered_before"], row["lifted_food_delivered_after"]) == (1, 3)
+    assert (row["lifted_food_delivered_only_before"], row["lifted_food_delivered_only_after"]) == (0, 2)
+    # A comparison written before the outcome existed still renders, without its column.
+    old = table.drop(columns=[c for c in table.columns if c.startswith("lifted_food_delivered")]).assign(before="b", after="a")
+    assert "lifted food delivered" not in comparison_markdown(old)
+    assert "lifted food delivered" in comparison_markdown(table.assign(before="b", after="a"))
 
 
 def test_runs_on_other_seeds_are_refused(tmp_path, capsys):
