@@ -19,7 +19,7 @@ from grits_lab.errors import InputError
 from grits_lab.io import write_text_atomic
 from grits_lab.markdown import markdown_table
 from grits_lab.report.run_records import load_run
-from grits_lab.report.spill_tables import delivered_share, has_attribution, spilled_after_scoop
+from grits_lab.report.spill_tables import delivered_share, has_attribution, lifted_episodes, spilled_after_scoop
 from grits_lab.report.vocabulary import method_display
 
 PAIR_KEYS = ("method", "food", "level", "trial")
@@ -74,7 +74,7 @@ def with_paired_outcomes(frame: pd.DataFrame) -> pd.DataFrame:
     ended with an error)."""
     frame = frame.copy()
     frame["spill_after_scoop"] = spilled_after_scoop(frame) > 0
-    lifted = (pd.to_numeric(frame["scooped"], errors="coerce") > 0) & ~frame["is_error"].astype(bool)
+    lifted = frame.index.isin(lifted_episodes(frame).index)
     frame["lifted_food_delivered"] = lifted & delivered_share(frame)[1].fillna(False).astype(bool)
     return frame
 

@@ -27,8 +27,8 @@ GRASP_LINK = 11  # panda_grasptarget
 ARM_FORCES = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
 # The arm motors' position gain per second. Bullet's position motor asks each step for the joint
 # velocity positionGain * (target - angle) / time_step, so a gain fixed per step would correct an
-# error twice as fast at half the step and jolt the arm when the step changes mid-episode
-# (`ScoopEnv.set_time_step`); per second it is one law at every step: 0.3 at 1/120 s, as always.
+# error twice as fast at half the step, another controller for every `sim.time_step`; per second it
+# is one law at every step: 0.3 at 1/120 s, as always.
 ARM_POSITION_GAIN_PER_S = 36.0
 # Links -1 (base) to this one stand on the table by design: neither a collision nor a contact of the arm.
 LAST_LINK_ON_TABLE = 1

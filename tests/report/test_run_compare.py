@@ -55,9 +55,9 @@ def test_lifted_food_delivered_needs_nine_tenths_in_the_target_bowl_and_no_spill
     # 20 lifted each (synthetic_records): 18 delivered is 90 %, 17 is not; a carry loss fails it; nothing lifted fails it.
     before = _run([("success", 40, 0, 18), ("success", 40, 0, 17), ("success", 40, 1, 20), ("scoop_fail", 40, 0, 0)], tmp_path, "b")
     after = _run([("success", 40, 0, 18), ("success", 40, 0, 18), ("success", 40, 0, 20), ("scoop_fail", 40, 0, 0)], tmp_path, "a")
-    delivered = with_paired_outcomes(normalize_records(before))["lifted_food_delivered"].tolist()
-    assert delivered == [True, False, False, False]
-    table = compare_runs(with_paired_outcomes(normalize_records(before)), with_paired_outcomes(normalize_records(after)))
+    before = with_paired_outcomes(normalize_records(before))
+    assert before["lifted_food_delivered"].tolist() == [True, False, False, False]
+    table = compare_runs(before, with_paired_outcomes(normalize_records(after)))
     row = table.set_index("method").loc["dp"]
     assert (row["lifted_food_delivered_before"], row["lifted_food_delivered_after"]) == (1, 3)
     assert (row["lifted_food_delivered_only_before"], row["lifted_food_delivered_only_after"]) == (0, 2)
