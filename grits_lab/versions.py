@@ -17,7 +17,7 @@ import subprocess
 from importlib import metadata
 from pathlib import Path
 
-PROTOCOL_VERSION = 11
+PROTOCOL_VERSION = 12
 PROTOCOL = f"scoop-v{PROTOCOL_VERSION}"
 
 PACKAGES = ("grits-lab", "numpy", "pandas", "pyarrow", "matplotlib", "jinja2", "torch", "pybullet", "ray", "optuna", "open3d-cpu", "open3d")

@@ -208,7 +208,8 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     Each action runs under its stage's name (`ScoopEnv.set_stage`: lift, carry, pour, after_pour),
     so every particle spilled is attributed to the stage that lost it. The stages start from the
     pose the arm is commanded to (`ScoopEnv.anchor_pose_target`) and run at
-    `settings.solver_iterations` (`ScoopEnv.set_solver_iterations`, reached over the first action). Besides the metrics:
+    `settings.solver_iterations` (`ScoopEnv.set_solver_iterations`, reached over the first action) and
+    `settings.time_step` (`ScoopEnv.set_time_step`). Besides the metrics:
     "ik_failures" (actions of the transfer and pour whose pose the arm could not reach),
     "max_joint_step_rad" (the largest change of a commanded joint angle in one action, rad) and
     "max_joint_speed_ratio" (the largest over that joint's Panda velocity limit: above 1 no Panda
@@ -232,6 +233,7 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
     reach = math.hypot(spoon.half_length, spoon.half_width)
     current = matrix_to_pose9(scene.spoon_pose())
     env.anchor_pose_target()  # the lift starts where the arm is commanded, not where an unreachable scoop pose lay
+    env.set_time_step(settings.time_step)  # before the check: the stages after the scoop step at it
     max_step = settings.max_speed / env.config.control_hz
     # The robot's base stands at the world origin (grits_lab/sim/world.py): radial = away from it.
     heading = math.atan2(target.centre[1], target.centre[0]) if settings.heading == "radial" else None
@@ -261,7 +263,7 @@ def run_transfer(env: ScoopEnv, scene: EpisodeScene, settings: TransferSettings)
         scene.advance()
 
     held = bool(plan.n_checks) and not plan.reachable and settings.no_option == "hold"
-    env.set_solver_iterations(settings.solver_iterations, ramp_steps=env.config.substeps)  # over the first action
+    env.set_solver_iterations(settings.solver_iterations, ramp_steps=env.substeps)  # over the first action
     if held:  # no motion the arm can follow: it keeps the spoon where the scoop left it
         for _ in range(settings.settle_steps):
             step(current, "lift")

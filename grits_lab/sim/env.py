@@ -26,7 +26,7 @@ from grits_lab.sim.foods import FoodSpec, level_count, load_foods, sample_partic
 from grits_lab.sim.spill_metrics import COVERAGE_THRESHOLD, SpillTracker, above_spoon_rim, classify, fill_height, spoon_coverage
 from grits_lab.sim.robot import COARSE_IK, FINE_IK, HEADING_FREE_TOLERANCE, LIMIT_AVOID_STEP, REST_POSE, IKConvergence, PandaKinematics, joint_speed_ratio, pose_to_matrix, slowed_steps, spoon_in_hand
 from grits_lab.sim.shapes import TARGET_BOWL, BowlGeometry, SpoonGeometry
-from grits_lab.sim.world import TABLE_TOP, World, build_static_scene, build_world, settle
+from grits_lab.sim.world import CONSTRAINT_ERP, TABLE_TOP, World, build_static_scene, build_world, settle
 
 DEFAULT_FOOD = "mung_beans"
 # Metres the arm's links keep from the table and the bowls on a checked path (`check_path`): a
@@ -226,6 +226,7 @@ class ScoopEnv:
         self.carry_peak_spoon_accel = 0.0
         self._spoon_velocity: np.ndarray | None = None
         self._solver_ramp: list[int] = []  # iterations of the next physics steps (`set_solver_iterations`)
+        self._erp_ramp: list[float] = []  # constraint error reduction of the next physics steps (`set_time_step`)
         self.rest_pull = True
         self.ik_refine = False
         counts = self._classify()
@@ -265,13 +266,13 @@ class ScoopEnv:
 
     def step_along(self, poses: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         """`step` to the last of the 9-D poses `poses` (n, 9) through the others: one IK piece per
-        pose, the control period's physics steps shared among them (n <= `SimConfig.substeps`).
+        pose, the control period's physics steps shared among them (n <= `ScoopEnv.substeps`).
         A motion generator's finer path between two actions (`geometry.cubic_pose_path`); the
         records and info are `step`'s. InputError for other shapes or non-finite poses."""
         world = self._require_world()
         p = np.asarray(poses, dtype=np.float64)
-        if p.ndim != 2 or p.shape[1] != 9 or not 1 <= len(p) <= self.config.substeps or not np.all(np.isfinite(p)):
-            raise InputError(f"poses must be finite, (n, 9) with 1 <= n <= {self.config.substeps}; got shape {p.shape}")
+        if p.ndim != 2 or p.shape[1] != 9 or not 1 <= len(p) <= self.substeps or not np.all(np.isfinite(p)):
+            raise InputError(f"poses must be finite, (n, 9) with 1 <= n <= {self.substeps}; got shape {p.shape}")
         poses = [pose9_to_matrix(x) for x in p]
         return self._move(world, poses[-1], poses, converged=FINE_IK)
 
@@ -284,7 +285,7 @@ class ScoopEnv:
         if cfg.freeze_distance is not None and len(world.particles):
             world.freeze(self._far_at_rest(world, start[:3, 3], target[:3, 3], cfg.freeze_distance))
         pieces = len(poses)
-        steps = cfg.substeps
+        steps = self.substeps
         joints_before = self._joint_target.copy()
         failed = False
         done = executed = 0
@@ -292,7 +293,7 @@ class ScoopEnv:
             failed |= not reached
             n = (steps * (k + 1)) // pieces - done
             done += n
-            n_run = slowed_steps(joints - self._joint_target, n, cfg.time_step, cfg.joint_speed_cap)
+            n_run = slowed_steps(joints - self._joint_target, n, world.time_step, cfg.joint_speed_cap)
             self._follow(world, self._joint_target, joints, n_run)
             self._joint_target = joints
             executed += n_run
@@ -300,7 +301,7 @@ class ScoopEnv:
         self.step_count += 1
         self.ik_failures += int(failed)
         self.slowed_actions += int(executed > steps)
-        self.action_time_s += executed * cfg.time_step
+        self.action_time_s += executed * world.time_step
         delta = self._joint_target - joints_before
         joint_step = float(np.abs(delta).max())
         speed_ratio = joint_speed_ratio(delta, cfg.control_hz)
@@ -323,7 +324,7 @@ class ScoopEnv:
             for _ in range(n):
                 self._physics_step(world)
             return
-        velocity = (joints - previous) / (n * self.config.time_step)
+        velocity = (joints - previous) / (n * world.time_step)
         for i in range(1, n + 1):
             world.command_joints(previous + (joints - previous) * (i / n), velocity)
             self._physics_step(world)
@@ -333,11 +334,13 @@ class ScoopEnv:
         acceleration from its velocity change over the step goes into `carry_peak_spoon_accel` (m/s^2)."""
         if self._solver_ramp:
             world.client.setPhysicsEngineParameter(numSolverIterations=self._solver_ramp.pop(0))
+        if self._erp_ramp:
+            world.client.setPhysicsEngineParameter(erp=self._erp_ramp.pop(0))
         world.step(1)
         if self._spoon_velocity is None:  # outside the lift and carry (`set_stage`)
             return
         v = np.asarray(world.client.getBaseVelocity(world.spoon)[0], dtype=np.float64)
-        accel = float(np.linalg.norm(v - self._spoon_velocity)) / self.config.time_step
+        accel = float(np.linalg.norm(v - self._spoon_velocity)) / world.time_step
         self.carry_peak_spoon_accel = max(self.carry_peak_spoon_accel, accel)
         self._spoon_velocity = v
 
@@ -370,6 +373,44 @@ class ScoopEnv:
         stages after the scoop start with it (`run_transfer`). RuntimeError before `reset`."""
         self._require_world()
         self._pose_target = self._spoon_pose_at(self._joint_target)
+
+    @property
+    def substeps(self) -> int:
+        """Physics steps per action at the current time step (`set_time_step`; a reset starts at
+        `SimConfig.substeps`)."""
+        world = self._require_world()
+        return int(round(1.0 / (self.config.control_hz * world.time_step)))
+
+    def set_time_step(self, time_step: float | None) -> None:
+        """The physics time step from now on, seconds (PyBullet's fixedTimeStep); None:
+        `SimConfig.time_step`. Every reset starts again at the config's. The stages after the
+        scoop halve it (`TransferSettings.time_step`): a heap carried at 1/120 s creeps off the
+        spoon, at 1/240 s it stays (docs/experiments/oracle_high_physics_fine). An action keeps its
+        control period (`SimConfig.control_hz`), run over `substeps` steps; the arm's motors keep their
+        gain per second (`robot.ARM_POSITION_GAIN_PER_S`).
+
+        The spoon hangs from the hand by a fixed constraint that Bullet holds like a spring whose
+        stiffness per second is erp / time_step^2 (`world.CONSTRAINT_ERP`). Switched with erp kept, a
+        halved step makes it four times as stiff in one step and the held spoon jolts (an empty
+        spoon held still: 3.9 m/s^2 in the first step, then a swing); so the step starts at erp x
+        (new / old)^2, the old stiffness, and erp returns to `CONSTRAINT_ERP` in equal steps over the
+        next action (0.2 m/s^2). InputError for a step outside [0.0001, 0.02] s, one whose control
+        period is not a whole number of steps, or one with fewer steps per action than
+        `SimConfig.ik_per_action`; RuntimeError before `reset`."""
+        world = self._require_world()
+        dt = self.config.time_step if time_step is None else float(time_step)
+        steps = 1.0 / (self.config.control_hz * dt) if dt > 0 else 0.0
+        if not (1e-4 <= dt <= 0.02 and abs(steps - round(steps)) < 1e-6 and round(steps) >= self.config.ik_per_action):
+            raise InputError(f"time step must be in [0.0001, 0.02] s with a whole number of at least "
+                             f"{self.config.ik_per_action} steps per {1.0 / self.config.control_hz:g} s action, got {dt}")
+        ratio = dt / world.time_step
+        world.client.setPhysicsEngineParameter(fixedTimeStep=dt)
+        world.time_step = dt
+        if ratio == 1.0:
+            return
+        start, n = CONSTRAINT_ERP * ratio ** 2, self.substeps
+        self._erp_ramp = [start + (CONSTRAINT_ERP - start) * (k + 1) / n for k in range(n)]
+        world.client.setPhysicsEngineParameter(erp=start)
 
     def set_solver_iterations(self, iterations: int | None, ramp_steps: int = 0) -> None:
         """Constraint-solver iterations per physics step from now on (PyBullet's
@@ -424,8 +465,8 @@ class ScoopEnv:
         arm cannot follow no longer costs a full IK refinement (`PandaKinematics.refine`) at every
         piece after it. interpolation: "linear", the pieces `step` solves (straight,
         `SimConfig.ik_per_action` an action, to COARSE_IK); "cubic", those `step_along` solves for a
-        motion along `geometry.cubic_pose_path` through `path` from the pose last asked for (one a
-        physics step, to FINE_IK), as the stages after the scoop move with `transfer.interpolation:
+        motion along `geometry.cubic_pose_path` through `path` from the pose last asked for
+        (`SimConfig.substeps` an action, to FINE_IK, whatever `set_time_step` set), as the stages after the scoop move with `transfer.interpolation:
         cubic`: the check then solves the very IK the motion will. Raises RuntimeError before
         `reset`; InputError for another interpolation.
         """

@@ -44,6 +44,11 @@ TARGET_COLOR = (0.55, 0.75, 0.95, 1.0)
 SPOON_COLOR = (0.75, 0.76, 0.8, 1.0)
 
 
+# Bullet's error reduction parameter for joints and constraints (PyBullet's `erp`; contacts have
+# their own, `contactERP`): the share of a constraint's position error corrected in one step, 0.2 by
+# Bullet's default, set explicitly so that `ScoopEnv.set_time_step` knows what it ramps back to.
+CONSTRAINT_ERP = 0.2
+
 @dataclass
 class World:
     """Body ids and geometry of a built world; `client` is the only handle to its simulator."""
@@ -66,6 +71,11 @@ class World:
     settle_time_s: float = 0.0
     particle_masses: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (N,) kg, as built
     frozen: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))  # (N,) made static by `freeze`
+    time_step: float = 0.0  # seconds per physics step now; 0 until built: `config.time_step` (`ScoopEnv.set_time_step`)
+
+    def __post_init__(self) -> None:
+        if not self.time_step:
+            self.time_step = float(self.config.time_step)
 
     # ---- state queries -------------------------------------------------------------------
     def particle_positions(self) -> np.ndarray:
@@ -114,7 +124,7 @@ class World:
         """Joint position targets (7,) rad for the arm's motors, with velocity targets (7,) rad/s
         (None: zero, the motors brake towards the target); the position gain is the same per second
         at every time step (`ARM_POSITION_GAIN_PER_S`)."""
-        gain = ARM_POSITION_GAIN_PER_S * self.config.time_step
+        gain = ARM_POSITION_GAIN_PER_S * self.time_step
         self.client.setJointMotorControlArray(
             self.robot, list(ARM_JOINTS), pb.POSITION_CONTROL, targetPositions=[float(q) for q in joints],
             targetVelocities=[0.0] * 7 if velocities is None else [float(v) for v in velocities],
@@ -277,10 +287,10 @@ def build_static_scene(client: BulletClient, source_position: np.ndarray, target
 
 def apply_physics(client: BulletClient, config: SimConfig) -> None:
     """The world's physics settings in `client`: time step, solver iterations, contact breaking
-    threshold, deterministic pairs, gravity (SimConfig)."""
+    threshold, deterministic pairs, the constraints' error reduction (`CONSTRAINT_ERP`), gravity (SimConfig)."""
     client.setPhysicsEngineParameter(
         fixedTimeStep=config.time_step, numSolverIterations=config.solver_iterations, numSubSteps=0,
-        deterministicOverlappingPairs=1, contactBreakingThreshold=config.contact_breaking_threshold,
+        deterministicOverlappingPairs=1, contactBreakingThreshold=config.contact_breaking_threshold, erp=CONSTRAINT_ERP,
     )
     client.setGravity(0, 0, -9.81)
 
