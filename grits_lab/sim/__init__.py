@@ -1,7 +1,7 @@
 """The simulated scooping world: PyBullet scene, food library, robot with spoon, cameras, episode metrics.
 
 No torch and no Ray here: everything runs in a plain process, one PyBullet client per env.
-Importing this package registers the Gymnasium env "grits_lab/Scoop-v11" (grits_lab/sim/gym_env.py).
+Importing this package registers the Gymnasium env "grits_lab/Scoop-v12" (grits_lab/sim/gym_env.py).
 """
 
 import gymnasium

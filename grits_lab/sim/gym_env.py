@@ -1,7 +1,7 @@
-"""`ScoopGymEnv`: the scooping world as a registered `gymnasium.Env` ("grits_lab/Scoop-v11").
+"""`ScoopGymEnv`: the scooping world as a registered `gymnasium.Env` ("grits_lab/Scoop-v12").
 
     import gymnasium, grits_lab.sim
-    env = gymnasium.make("grits_lab/Scoop-v11", food="prune", level="low", render_mode="rgb_array")
+    env = gymnasium.make("grits_lab/Scoop-v12", food="prune", level="low", render_mode="rgb_array")
     obs, info = env.reset(seed=0)
 
 It is a `ScoopEnv` (every query of the simulator stays available through `env.unwrapped`) with

@@ -330,6 +330,41 @@ def test_the_stages_after_the_scoop_run_at_the_transfers_solver_iterations(env, 
     assert seen[0] == env.config.solver_iterations and len(seen) > 1 and set(seen[1:]) == {expected}
 
 
+@pytest.mark.parametrize("time_step", [1 / 240, None])
+def test_the_stages_after_the_scoop_run_at_the_transfers_time_step(env, time_step):
+    from grits_lab.evaluation.evaluation_config import TransferSettings
+    from grits_lab.evaluation.task_episode import run_transfer
+
+    scene, _, _ = _scene_obstacles(env, (0.30, 0.20))
+    assert env.world.time_step == env.config.time_step  # the scoop's
+    settings = _rolled(TransferSettings, alternative_level_steps=[], alternative_level_yaw_deg=[], alternative_pour_heights=[],
+                       alternative_pour_offsets=[], time_step=time_step)
+    seen, along = [], env.step_along
+
+    def step_along(poses):  # the step every action of the transfer runs at, and its IK pieces
+        seen.append((env.world.client.getPhysicsEngineParameters()["fixedTimeStep"], len(poses)))
+        return along(poses)
+
+    env.step_along = step_along
+    try:
+        out = run_transfer(env, scene, settings)
+    finally:
+        del env.step_along
+    expected = env.config.time_step if time_step is None else time_step
+    # The spline keeps its pieces (`sim.substeps` an action) at either step: the arm is asked for the same path.
+    assert len(seen) == out["transfer_steps"] and {n for _, n in seen} == {env.config.substeps}
+    assert [dt for dt, _ in seen] == pytest.approx([expected] * len(seen))
+
+
+def test_transfer_time_step_outside_its_range_is_a_config_error():
+    from grits_lab.errors import ConfigError
+    from grits_lab.evaluation.evaluation_config import TransferSettings
+
+    with pytest.raises(ConfigError, match="transfer.time_step"):
+        TransferSettings(time_step=0.0)
+    assert TransferSettings(time_step=None).time_step is None
+
+
 def test_transfer_solver_iterations_outside_their_range_are_a_config_error():
     from grits_lab.errors import ConfigError
     from grits_lab.evaluation.evaluation_config import TransferSettings

@@ -92,6 +92,64 @@ def test_a_still_heaped_spoon_keeps_its_heap_at_the_transfers_solver_iterations(
     assert np.median(converged) < 0.3 * np.median(unconverged)
 
 
+def test_a_time_step_is_refused_unless_an_action_is_whole_steps_and_a_reset_restores_the_configs():
+    from grits_lab.errors import InputError
+
+    env = ScoopEnv()
+    try:
+        env.reset(seed=0, options={"food": "soybeans", "n_particles": 0})
+        assert env.substeps == SimConfig().substeps == 12
+        for bad in (0.003, 1e-5, 0.05, 0.1 / 3):  # 33.3 steps an action; too fine; too coarse; 3 steps < 4 IK pieces
+            with pytest.raises(InputError, match="time step must be"):
+                env.set_time_step(bad)
+        env.set_time_step(1 / 240)
+        assert env.world.client.getPhysicsEngineParameters()["fixedTimeStep"] == pytest.approx(1 / 240)
+        assert env.substeps == 24 and env.world.time_step == pytest.approx(1 / 240)
+        before = env.action_time_s
+        env.step(matrix_to_pose9(env.pose_target))  # an action keeps its control period
+        assert env.action_time_s - before == pytest.approx(1 / env.config.control_hz)
+        env.set_time_step(None)
+        assert env.substeps == 12
+        env.set_time_step(1 / 240)
+        env.reset(seed=0, options={"food": "soybeans", "n_particles": 0})
+        assert env.world.client.getPhysicsEngineParameters()["fixedTimeStep"] == pytest.approx(env.config.time_step)
+        assert env.substeps == 12
+    finally:
+        env.close()
+
+
+def _peak_after_halving_the_step(ramped: bool) -> float:
+    """Peak acceleration (m/s^2) of an empty spoon held still over the two actions after the
+    physics step halves: through `set_time_step` (the grasp's stiffness ramped) or by the
+    time step alone (Bullet's erp kept)."""
+    env = ScoopEnv()
+    try:
+        env.reset(seed=0, options={"food": "soybeans", "n_particles": 0})
+        hold = matrix_to_pose9(env.pose_target)
+        for _ in range(10):
+            env.step(hold)
+        env.set_stage("lift")  # measures the spoon's acceleration at every physics step
+        assert env.carry_peak_spoon_accel == 0.0
+        if ramped:
+            env.set_time_step(env.config.time_step / 2)
+        else:
+            env.world.client.setPhysicsEngineParameter(fixedTimeStep=env.config.time_step / 2)
+            env.world.time_step = env.config.time_step / 2
+        for _ in range(2):
+            env.step(hold)
+        return env.carry_peak_spoon_accel
+    finally:
+        env.close()
+
+
+def test_a_held_spoon_does_not_jolt_when_the_physics_step_halves():
+    """The grasp is a constraint Bullet holds like a spring of stiffness erp / dt^2: halved at
+    once with erp kept, the step makes it four times as stiff and the still spoon jolts;
+    `set_time_step` starts at the old stiffness and ramps erp back over one action."""
+    assert _peak_after_halving_the_step(ramped=False) > 2.0
+    assert _peak_after_halving_the_step(ramped=True) < 0.5
+
+
 def test_solver_iterations_are_refused_outside_their_range_and_restored_by_a_reset():
     from grits_lab.errors import InputError
 
