@@ -147,6 +147,8 @@ class SpillageConfig:
         require(self.n_action_steps >= 1, "n_action_steps", self.n_action_steps, "at least 1")
         require(self.base_expert_plans >= 0, "base_expert_plans", self.base_expert_plans, "non-negative")
         require(self.max_candidates_factor >= 1, "max_candidates_factor", self.max_candidates_factor, "at least 1")
+        if self.exit.carries():
+            self.exit.transfer.require_time_step_fits(self.sim, "exit.transfer.time_step")
 
     def identity(self) -> dict[str, Any]:
         """What determines the data (the executor and the output path do not)."""

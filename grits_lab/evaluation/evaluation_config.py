@@ -104,6 +104,7 @@ class EvaluationConfig(EpisodeGrid):
         require(len(set(self.methods)) == len(self.methods), "methods", self.methods, "without repeats")
         require(self.num_threads >= 1, "num_threads", self.num_threads, "at least 1")
         require(self.flush_every >= 1, "flush_every", self.flush_every, "at least 1")
+        self.transfer.require_time_step_fits(self.sim, "transfer.time_step")
 
 
 def load_evaluation_config(path: str | Path, overrides: dict[str, Any] | None = None) -> EvaluationConfig:

@@ -21,7 +21,7 @@ from grits_lab.errors import InputError
 from grits_lab.geometry import cubic_pose_path, matrix_to_rot6d, rot6d_to_matrix
 from grits_lab.seeding import derive_seed, make_rng
 from grits_lab.sim.cameras import CameraImage, render
-from grits_lab.sim.sim_config import MAX_SOLVER_ITERATIONS, SimConfig
+from grits_lab.sim.sim_config import MAX_SOLVER_ITERATIONS, SimConfig, steps_per_action, time_step_expectation
 from grits_lab.sim.foods import FoodSpec, level_count, load_foods, sample_particles
 from grits_lab.sim.spill_metrics import COVERAGE_THRESHOLD, SpillTracker, above_spoon_rim, classify, fill_height, spoon_coverage
 from grits_lab.sim.robot import COARSE_IK, FINE_IK, HEADING_FREE_TOLERANCE, LIMIT_AVOID_STEP, REST_POSE, IKConvergence, PandaKinematics, joint_speed_ratio, pose_to_matrix, slowed_steps, spoon_in_hand
@@ -378,8 +378,7 @@ class ScoopEnv:
     def substeps(self) -> int:
         """Physics steps per action at the current time step (`set_time_step`; a reset starts at
         `SimConfig.substeps`)."""
-        world = self._require_world()
-        return int(round(1.0 / (self.config.control_hz * world.time_step)))
+        return steps_per_action(self.config.control_hz, self._require_world().time_step)
 
     def set_time_step(self, time_step: float | None) -> None:
         """The physics time step from now on, seconds (PyBullet's fixedTimeStep); None:
@@ -399,10 +398,9 @@ class ScoopEnv:
         `SimConfig.ik_per_action`; RuntimeError before `reset`."""
         world = self._require_world()
         dt = self.config.time_step if time_step is None else float(time_step)
-        steps = 1.0 / (self.config.control_hz * dt) if dt > 0 else 0.0
-        if not (1e-4 <= dt <= 0.02 and abs(steps - round(steps)) < 1e-6 and round(steps) >= self.config.ik_per_action):
-            raise InputError(f"time step must be in [0.0001, 0.02] s with a whole number of at least "
-                             f"{self.config.ik_per_action} steps per {1.0 / self.config.control_hz:g} s action, got {dt}")
+        expectation = time_step_expectation(dt, self.config.control_hz, self.config.ik_per_action)
+        if expectation:
+            raise InputError(f"time step must be {expectation}, got {dt}")
         ratio = dt / world.time_step
         world.client.setPhysicsEngineParameter(fixedTimeStep=dt)
         world.time_step = dt

@@ -40,6 +40,23 @@ def _default_cameras() -> list[CameraConfig]:
 MAX_SOLVER_ITERATIONS = 200  # the most constraint-solver iterations per physics step a config may ask for
 
 
+def steps_per_action(control_hz: float, time_step: float) -> int:
+    """Physics steps of `time_step` seconds in one action at `control_hz`."""
+    return int(round(1.0 / (control_hz * time_step)))
+
+
+def time_step_expectation(time_step: float, control_hz: float, ik_per_action: int) -> str | None:
+    """None when an episode can step its physics at `time_step` seconds (`SimConfig.time_step`,
+    `TransferSettings.time_step`, `ScoopEnv.set_time_step`); otherwise what the step must be: in
+    [0.0001, 0.02] s, a whole number of steps per action at `control_hz`, at least `ik_per_action`
+    of them so that every IK piece is tracked for one."""
+    steps = 1.0 / (control_hz * time_step) if time_step > 0 else 0.0
+    if not (1e-4 <= time_step <= 0.02 and abs(steps - round(steps)) < 1e-6 and round(steps) >= ik_per_action):
+        return (f"in [0.0001, 0.02] s with a whole number of at least {ik_per_action} steps per "
+                f"{1.0 / control_hz:g} s action")
+    return None
+
+
 @dataclass
 class SimConfig:
     """Everything that shapes an episode besides the food and the seed.
@@ -131,4 +148,4 @@ class SimConfig:
     @property
     def substeps(self) -> int:
         """Physics steps per action."""
-        return int(round(1.0 / (self.control_hz * self.time_step)))
+        return steps_per_action(self.control_hz, self.time_step)

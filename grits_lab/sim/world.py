@@ -71,11 +71,10 @@ class World:
     settle_time_s: float = 0.0
     particle_masses: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (N,) kg, as built
     frozen: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))  # (N,) made static by `freeze`
-    time_step: float = 0.0  # seconds per physics step now; 0 until built: `config.time_step` (`ScoopEnv.set_time_step`)
+    time_step: float = field(init=False)  # seconds per physics step now: `config.time_step` until `ScoopEnv.set_time_step`
 
     def __post_init__(self) -> None:
-        if not self.time_step:
-            self.time_step = float(self.config.time_step)
+        self.time_step = float(self.config.time_step)
 
     # ---- state queries -------------------------------------------------------------------
     def particle_positions(self) -> np.ndarray:

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from grits_lab.config import require
-from grits_lab.sim.sim_config import MAX_SOLVER_ITERATIONS
+from grits_lab.sim.sim_config import MAX_SOLVER_ITERATIONS, SimConfig, time_step_expectation
 
 
 @dataclass
@@ -159,3 +159,11 @@ class TransferSettings:
                 "transfer.solver_iterations", self.solver_iterations, f"in [1, {MAX_SOLVER_ITERATIONS}], or null for the scoop's")
         require(self.time_step is None or 1e-4 <= self.time_step <= 0.02, "transfer.time_step", self.time_step,
                 "in [0.0001, 0.02] seconds, or null for the scoop's `sim.time_step`")
+
+    def require_time_step_fits(self, sim: SimConfig, key: str) -> None:
+        """ConfigError naming `key` unless `time_step` is one the episode's `sim` can step at
+        (`sim_config.time_step_expectation`): checked where both are known, when a config loads,
+        not in every episode's `ScoopEnv.set_time_step`."""
+        if self.time_step is not None:
+            expectation = time_step_expectation(self.time_step, sim.control_hz, sim.ik_per_action)
+            require(expectation is None, key, self.time_step, f"{expectation} (sim.control_hz {sim.control_hz:g})")

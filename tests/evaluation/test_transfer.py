@@ -365,6 +365,23 @@ def test_transfer_time_step_outside_its_range_is_a_config_error():
     assert TransferSettings(time_step=None).time_step is None
 
 
+def test_a_transfer_time_step_the_sim_cannot_step_at_is_refused_when_the_config_loads():
+    """0.003 s is in range but leaves 33.3 steps per 0.1 s action: refused by the evaluation and
+    the spillage configs at load, naming the key, before any episode runs."""
+    from grits_lab.collection.spillage_trials import SpillageConfig
+    from grits_lab.config import config_from_dict
+    from grits_lab.errors import ConfigError
+    from grits_lab.evaluation.evaluation_config import EvaluationConfig
+
+    with pytest.raises(ConfigError, match=r"`transfer.time_step` must be .*whole number"):
+        config_from_dict(EvaluationConfig, {"methods": ["expert"], "transfer": {"time_step": 0.003}})
+    with pytest.raises(ConfigError, match=r"`exit.transfer.time_step` must be .*whole number"):
+        config_from_dict(SpillageConfig, {"kind": "spillage", "output_dir": "unused", "exit": {"kind": "carry", "transfer": {"time_step": 0.003}}})
+    # The lift-and-exit never runs the transfer: its settings' step is not the trial's.
+    config_from_dict(SpillageConfig, {"kind": "spillage", "output_dir": "unused", "exit": {"kind": "exit", "transfer": {"time_step": 0.003}}})
+    assert config_from_dict(EvaluationConfig, {"methods": ["expert"], "transfer": {"time_step": 1 / 240}}).transfer.time_step == 1 / 240
+
+
 def test_transfer_solver_iterations_outside_their_range_are_a_config_error():
     from grits_lab.errors import ConfigError
     from grits_lab.evaluation.evaluation_config import TransferSettings
