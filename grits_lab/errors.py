@@ -15,3 +15,8 @@ class InputError(GritsError):
 
 class StorageError(GritsError):
     """An output location cannot be written, or a stored file is missing or corrupted."""
+
+
+class JobError(GritsError):
+    """A job ran but produced nothing: every unit of work it tried failed. The message names how
+    many, the first error, and where the tracebacks are."""

@@ -28,7 +28,7 @@ from grits_lab.data.format import (
     verify_episode,
     write_episode,
 )
-from grits_lab.errors import StorageError
+from grits_lab.errors import JobError, StorageError
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
 from grits_lab.versions import PROTOCOL
 
@@ -211,6 +211,15 @@ class Progress:
         self.bar.close()
 
 
+def refuse_empty(desc: str, episodes: int, failed: int, first_error: str, failures_dir: Path) -> None:
+    """JobError when a job ends with no episode at all and this run's episodes failed: a broken
+    installation or world (a missing library, a bad food file) stops the job here with its first
+    error, instead of leaving an empty dataset for the next stage to trip on. A dataset with some
+    episodes goes on (its failures are counted in the summary and retried by a rerun)."""
+    if episodes == 0 and failed > 0:
+        raise JobError(f"{desc}: every episode failed ({failed}); the first with {first_error} (tracebacks in {failures_dir})")
+
+
 def run_fixed_job(
     executor: Any,
     writer: DatasetWriter,
@@ -227,7 +236,7 @@ def run_fixed_job(
         bar.spilled += int(bool(spilled_of(meta)))
         bar.labelled += int(spilled_of(meta) is not None)
     start = time.perf_counter()
-    failed = 0
+    failed, first_error = 0, ""
     try:
         for result in executor.map_unordered(todo):
             if result.ok:
@@ -235,6 +244,7 @@ def run_fixed_job(
                 bar.update(spilled=spilled_of(result.payload["meta"]))
             else:
                 failed += 1
+                first_error = first_error or result.error
                 writer.write_failure(result.episode_id, failure_details(result))
                 bar.update(failed=True)
     finally:
@@ -248,4 +258,5 @@ def run_fixed_job(
         "wall_time_s_this_time": round(time.perf_counter() - start, 2),
     }
     writer.finalize(summary, complete=finished == len(specs))
+    refuse_empty(desc, finished, failed, first_error, writer.out_dir / FAILURE_DIR)
     return summary

@@ -296,3 +296,37 @@ def test_a_lift_and_exit_config_keeps_the_fingerprint_of_datasets_made_before_th
     assert "balance_on" not in identity and not {"kind", "transfer"} & set(identity["exit"])
     carry = config_from_dict(SpillageConfig, {"balance_on": "horizon"}).identity()
     assert carry["exit"]["kind"] == "carry" and carry["balance_on"] == "horizon" and carry["exit"]["transfer"]["max_speed"] == 0.12
+
+
+def _probe_specs(n, fail):
+    from grits_lab.runners import EpisodeSpec, probe_episode
+
+    return [EpisodeSpec(episode_id=f"ep{i:03d}", work=probe_episode, seed=100 + i, params={"fail": i in fail}) for i in range(n)]
+
+
+def test_a_job_whose_every_episode_failed_stops_with_the_first_error(tmp_path):
+    from grits_lab.collection.driver import run_fixed_job
+    from grits_lab.errors import JobError
+
+    writer = DatasetWriter(tmp_path / "ds", "demos", {"probe": 1})
+    with SerialExecutor() as ex, pytest.raises(JobError) as err:
+        run_fixed_job(ex, writer, _probe_specs(3, fail={0, 1, 2}), desc="demos", progress=False)
+    msg = str(err.value)
+    assert msg.startswith("demos: every episode failed (3); the first with ValueError: probe episode ep000 asked to fail")
+    assert str(tmp_path / "ds" / "failures") in msg
+    assert len(writer.failures()) == 3  # the tracebacks stay on disk for the user to read
+
+
+def test_a_job_with_some_failed_episodes_goes_on_and_counts_them(tmp_path):
+    from grits_lab.collection.driver import run_fixed_job
+
+    config = config_from_dict(DemosConfig, {
+        "output_dir": str(tmp_path / "demos"), "foods": ["dried_jujube"], "levels": ["low"], "bowl_configs": 1,
+        "cloud": {"n_points": 64, "cad_surface_samples": 500}, "executor": {"backend": "serial"},
+    })
+    specs = plan_demos(config) + _probe_specs(1, fail={0})
+    writer = DatasetWriter(config.output_dir, "demos", {"probe": 1})
+    with SerialExecutor() as ex:
+        summary = run_fixed_job(ex, writer, specs, desc="demos", progress=False)
+    assert summary["episodes"] == 1 and summary["failed"] == 1 and summary["requested"] == 2
+    assert [f["episode_id"] for f in writer.failures()] == ["ep000"]
