@@ -17,7 +17,7 @@ UNSEEN_FOODS: tuple[str, ...] = (
 RECORD_COLUMNS: dict[str, str] = {
     "run_id": "identifier of the evaluation or sweep run that produced the row",
     "protocol": "task and evaluation protocol the episode ran under, e.g. scoop-v4 (grits_lab/versions.py, docs/protocol.md)",
-    "method": "method name, e.g. rule_based, bc, scone, dp, dp_post, grits, grits_raw, grits_pointnet2",
+    "method": "method name, e.g. rule_based, bc, scone, dp, dp_post, grits, grits_raw, grits_pointnet2, grits_horizon",
     "food": "food name from the food library, e.g. sago",
     "split": "train or unseen",
     "level": "quantity level name, e.g. low or high",

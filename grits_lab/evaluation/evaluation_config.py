@@ -31,6 +31,7 @@ class CheckpointPaths:
     predictor: str | None = None  # spillage predictor, composite cloud + DP3 (grits, dp_post)
     predictor_raw: str | None = None  # trained on raw camera clouds (grits_raw)
     predictor_pointnet2: str | None = None  # PointNet++ encoder (grits_pointnet2)
+    predictor_horizon: str | None = None  # trained on the horizon label of a carry dataset (grits_horizon)
     bc: str | None = None  # behavior cloning (bc)
     demos: str | None = None  # demonstration dataset: SCONE's scoop prior (mean demonstration)
 

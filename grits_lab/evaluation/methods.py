@@ -44,6 +44,8 @@ METHODS: dict[str, MethodSpec] = {
     "grits": MethodSpec("diffusion", ("policy", "predictor"), "predictor", "guided", "GRITS: composite cloud + DP3 predictor"),
     "grits_raw": MethodSpec("diffusion", ("policy", "predictor_raw"), "predictor_raw", "guided", "GRITS, predictor on raw clouds"),
     "grits_pointnet2": MethodSpec("diffusion", ("policy", "predictor_pointnet2"), "predictor_pointnet2", "guided", "GRITS, PointNet++ predictor"),
+    "grits_horizon": MethodSpec("diffusion", ("policy", "predictor_horizon"), "predictor_horizon", "guided",
+                                "GRITS, predictor trained on horizon labels (what a chunk leads to until delivery)"),
 }
 
 

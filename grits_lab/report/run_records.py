@@ -265,7 +265,8 @@ def _with_guiding_predictor(frame: pd.DataFrame) -> pd.DataFrame:
     """`checkpoint_predictor` set to the digest of whichever predictor guided each episode.
 
     Records keep one digest column per checkpoint key (`checkpoint_predictor`,
-    `checkpoint_predictor_raw`, `checkpoint_predictor_pointnet2`); a method uses one of them.
+    `checkpoint_predictor_raw`, `checkpoint_predictor_pointnet2`, `checkpoint_predictor_horizon`); a method
+    uses one of them.
     """
     columns = sorted(c for c in frame.columns if c.startswith("checkpoint_predictor"))
     if not columns:

@@ -19,6 +19,7 @@ METHOD_NAMES: dict[str, str] = {
     "grits": "GRITS",
     "grits_raw": "GRITS (raw cloud)",
     "grits_pointnet2": "GRITS (PointNet++)",
+    "grits_horizon": "GRITS (horizon labels)",
 }
 
 # Paper Fig. 5 compares these methods, in this order.

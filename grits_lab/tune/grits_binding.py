@@ -8,7 +8,7 @@ evaluation record per episode (columns of grits_lab/records.py). Running the met
 `GritsEvaluator`; besides it, grits_lab.tune reads only the episode grid and the evaluation
 config's food library from the evaluation layer.
 
-`evaluation.method` is a guided built-in (grits, grits_raw, grits_pointnet2) or a controller the
+`evaluation.method` is a guided built-in (grits, grits_raw, grits_pointnet2, grits_horizon) or a controller the
 evaluation config registers (`custom_methods`, or an entry point) whose class takes keyword
 arguments `rho` and `s` (grits_lab/evaluation/custom_methods.py); any other method is refused
 before the study exists, in one line naming what it lacks (`methods.guidance_gap`).

@@ -16,7 +16,8 @@ def eval_config(models: dict[str, str], tmp: Path, **changes):
     data = {
         "run_id": "test", "output_dir": str(tmp), "seed": 3, "methods": ["dp"], "foods": ["chocolate_balls"], "levels": ["low"],
         "trials": 1, "checkpoints": {"policy": models["policy"], "predictor": models["predictor"], "predictor_raw": models["predictor"],
-                                      "predictor_pointnet2": models["predictor"], "bc": models["bc"], "demos": models["demos"]},
+                                      "predictor_pointnet2": models["predictor"], "predictor_horizon": models["predictor"],
+                                      "bc": models["bc"], "demos": models["demos"]},
         "scoop": {"max_steps": 36, "min_steps": 12}, "transfer": {"pour_steps": 8, "settle_steps": 5},
         "cloud": {"n_points": N_POINTS, "cad_surface_samples": 400}, "executor": {"backend": "serial"},
     }

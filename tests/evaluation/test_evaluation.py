@@ -18,7 +18,7 @@ from grits_lab.runners import SerialExecutor
 
 # Columns that legitimately differ between two runs of the same episode (clock, method identity).
 VOLATILE = {"method", "rho", "s", "wall_time_s", "scoop_time_s", "transfer_time_s", "plan_time_mean_s", "plan_time_max_s",
-            "checkpoint_predictor", "checkpoint_predictor_raw", "checkpoint_predictor_pointnet2", "run_id", "guidance_step"}
+            "checkpoint_predictor", "checkpoint_predictor_raw", "checkpoint_predictor_pointnet2", "checkpoint_predictor_horizon", "run_id", "guidance_step"}
 
 
 def outcome(row: pd.Series) -> dict:
@@ -57,6 +57,9 @@ def test_every_method_gives_a_complete_record(all_methods):
         assert len(row["plan_p_spill_unguided"]) == len(row["plan_p_spill_guided"]) == len(row["plan_displacement_mm"]) == n
         assert all(0 <= p <= 1 for p in row["plan_p_spill_guided"]) and min(row["plan_displacement_mm"]) >= 0
     assert guided.loc["grits", "guidance_step"] == "gradient" and guided.loc["dp", "guidance_step"] == ""
+    # grits_horizon is GRITS guided by the predictor under its own key, recorded under that key
+    assert guided.loc["grits_horizon", "guided_steps"] == 6 * guided.loc["grits_horizon", "n_plans"]
+    assert guided.loc["grits_horizon", "checkpoint_predictor_horizon"] == guided.loc["grits", "checkpoint_predictor"]
 
 
 def test_rho_zero_grits_is_dp_for_the_whole_episode(models, tmp_path, all_methods):

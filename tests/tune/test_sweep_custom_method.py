@@ -65,7 +65,7 @@ def test_a_sweep_tunes_a_registered_guided_controller_and_its_records_carry_each
 
 @pytest.mark.parametrize("method, lacks", [
     ("torch_mlp", f"{EXAMPLE}:TorchPolicyController has no keyword arguments `rho` and `s`"),
-    ("dp", "of the built-in methods only grits, grits_raw, grits_pointnet2 sample with `guidance`"),
+    ("dp", "of the built-in methods only grits, grits_raw, grits_pointnet2, grits_horizon sample with `guidance`"),
 ], ids=["registered", "built-in"])
 def test_a_method_that_takes_no_guidance_parameters_is_refused_before_the_study_exists(
         sweep_file, tmp_path, capsys, method, lacks):
