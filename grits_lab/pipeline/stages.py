@@ -63,11 +63,13 @@ class Layout:
             "demos": [self.dataset("demos")],
             "spillage": [self.dataset("spillage")],
             "spillage_heldout": [self.dataset("spillage_heldout")],
+            "spillage_carry": [self.dataset("spillage_carry")],
             "policy": [self.policy_dir],
             "bc": [self.bc_dir],
             "predictor": [self.predictor_dir("predictor")],
             "predictor_raw": [self.predictor_dir("predictor_raw")],
             "predictor_pointnet2": [self.predictor_dir("predictor_pointnet2")],
+            "predictor_horizon": [self.predictor_dir("predictor_horizon")],
             "evaluate": [self.evaluate_dir / "episodes.parquet", self.evaluate_dir / "records"],
             "sweep": [self.evaluate_dir / "sweep"],
             "report": [self.report_dir],
@@ -84,6 +86,17 @@ def bc_checkpoint(layout: Layout) -> Path:
 
 def predictor_checkpoint(layout: Layout, stage: str) -> Path:
     return layout.predictor_dir(stage) / "best.pt"
+
+
+COLLECT_STAGES = ("demos", "spillage", "spillage_heldout", "spillage_carry")
+PREDICTOR_STAGES = ("predictor", "predictor_raw", "predictor_pointnet2", "predictor_horizon")
+
+
+def predictor_dataset(stage: str) -> str:
+    """The collect stage a predictor stage trains on: the carry set (trials ending with the
+    evaluation's transfer and pour, so that horizon labels reach delivery) for predictor_horizon,
+    the lift-and-exit set for the others."""
+    return "spillage_carry" if stage == "predictor_horizon" else "spillage"
 
 
 def _executor(data: dict[str, Any], workers: int | None, address: str | None) -> dict[str, Any]:
@@ -103,7 +116,7 @@ def _writing_to(data: dict[str, Any], path: Path) -> dict[str, Any]:
 def wire(stage: str, data: dict[str, Any], layout: Layout, present: set[str],
          workers: int | None, address: str | None) -> dict[str, Any]:
     """The stage's config mapping with the pipeline's links set. `present`: configured stages."""
-    if stage in ("demos", "spillage", "spillage_heldout"):
+    if stage in COLLECT_STAGES:
         data = _writing_to(data, layout.dataset(stage))
         if stage != "demos" and "demos" in present:
             # the spillage trajectories are shifts of the mean demonstration (SPEC)
@@ -114,7 +127,7 @@ def wire(stage: str, data: dict[str, Any], layout: Layout, present: set[str],
     if stage == "bc":
         return _writing_to({**data, "dataset": str(layout.dataset("demos"))}, layout.bc_dir)
     if stage.startswith("predictor"):
-        data = merge_mappings(data, {"data": {"dataset": str(layout.dataset("spillage"))}})
+        data = merge_mappings(data, {"data": {"dataset": str(layout.dataset(predictor_dataset(stage)))}})
         return _writing_to({**data, "name": stage}, layout.predictor_root)
     if stage == "evaluate":
         checkpoints: dict[str, str | None] = {
@@ -122,7 +135,7 @@ def wire(stage: str, data: dict[str, Any], layout: Layout, present: set[str],
             "bc": str(bc_checkpoint(layout)) if "bc" in present else None,
             "demos": str(layout.dataset("demos")) if "demos" in present else None,
         }
-        for name in ("predictor", "predictor_raw", "predictor_pointnet2"):
+        for name in PREDICTOR_STAGES:
             checkpoints[name] = str(predictor_checkpoint(layout, name)) if name in present else None
         data = merge_mappings(data, {"checkpoints": checkpoints})
         data = _writing_to(data, layout.evaluate_dir)
@@ -150,7 +163,14 @@ def load_stage(stage: str, config_path: Path) -> Any:
     Keys and values, and for demos and evaluate the food and level names; nothing is written.
     Raises ConfigError or InputError with the loader's one-line message.
     """
-    return _LOADERS[_kind(stage)](config_path)
+    config = _LOADERS[_kind(stage)](config_path)
+    if stage == "spillage_carry" and not (config.kind == "spillage" and config.exit.carries()):
+        raise ConfigError("the spillage_carry stage collects trials that end with the evaluation's carry: its config needs "
+                          "`kind: spillage` and `exit: {kind: carry}` (experiments/spillage_carry_cpu.yaml)")
+    if stage == "predictor_horizon" and config.data.label != "horizon":
+        raise ConfigError(f"the predictor_horizon stage trains on the horizon label: its config needs `data.label: horizon`, "
+                          f"not {config.data.label!r} (experiments/predictor_cpu_carry_horizon.yaml)")
+    return config
 
 
 def check(stage: str, texts: dict[str, str], source: str | None = None) -> None:
@@ -263,7 +283,7 @@ def _run_predictor(stage: str, config: Any, layout: Layout, progress: bool) -> d
 
     summary = train_predictor(config, progress=progress)
     heldout = layout.dataset("spillage_heldout")
-    if (heldout / "index.parquet").exists() or (heldout / "episodes").is_dir():
+    if predictor_dataset(stage) == "spillage" and (heldout / "index.parquet").exists() or (heldout / "episodes").is_dir():
         predictor = load_predictor(predictor_checkpoint(layout, stage))
         summary = {**summary, "heldout": evaluate_predictor(predictor, heldout)}
     return summary
@@ -295,6 +315,7 @@ _LOADERS: dict[str, Callable[[Path], Any]] = {
     "demos": _load_collect,
     "spillage": _load_collect,
     "spillage_heldout": _load_collect,
+    "spillage_carry": _load_collect,
     "policy": _load_policy,
     "bc": _load_bc,
     "predictor": _load_predictor,
@@ -307,6 +328,7 @@ _RUNNERS: dict[str, Callable[[str, Any, Layout, bool], dict[str, Any]]] = {
     "demos": _run_collect,
     "spillage": _run_collect,
     "spillage_heldout": _run_collect,
+    "spillage_carry": _run_collect,
     "policy": _run_policy,
     "bc": _run_bc,
     "predictor": _run_predictor,

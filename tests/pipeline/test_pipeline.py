@@ -193,3 +193,47 @@ def test_the_report_stage_shows_every_training_runs_curves(tmp_path):
     assert summary["output_dir"] == str(layout.report_dir)
     section = html.split("<h2>Training</h2>", 1)[1].split("</section>", 1)[0]
     assert section.count("<img") == 3 and all(f"Training: {d}" in section for d in (layout.policy_dir, layout.bc_dir))
+
+
+def _carry_pipeline(tmp_path, **stage_files):
+    files = {"spillage_carry": "experiments/spillage_carry_cpu.yaml", "predictor_horizon": "experiments/predictor_cpu_carry_horizon.yaml",
+             **stage_files}
+    return _write(tmp_path / "pipeline.yaml", {
+        "name": "carry", "output_dir": str(tmp_path / "run"), "stages": {
+            "demos": {"config": "experiments/demos_cpu.yaml"},
+            "spillage_carry": {"config": files["spillage_carry"]},
+            "policy": {"config": "experiments/policy_cpu.yaml"},
+            "predictor_horizon": {"config": files["predictor_horizon"]},
+            "evaluate": {"config": "experiments/evaluate_cpu.yaml", "overrides": {"methods": ["dp", "grits_horizon"]}},
+        }})
+
+
+def test_the_horizon_predictor_trains_on_the_carry_set_and_guides_grits_horizon(tmp_path):
+    from grits_lab.pipeline.pipeline_run import stage_config_text
+    from grits_lab.pipeline.stages import Layout, check
+
+    config = load_pipeline_config(_carry_pipeline(tmp_path))
+    layout = Layout(tmp_path / "run")
+    assert config.ordered_stages() == ["demos", "spillage_carry", "policy", "predictor_horizon", "evaluate"]
+    texts = {stage: stage_config_text(stage, config, layout) for stage in config.ordered_stages()}
+    for stage in texts:
+        check(stage, texts, config.stages[stage].config)
+    carry = yaml.safe_load(texts["spillage_carry"])
+    assert carry["output_dir"] == str(layout.dataset("spillage_carry")) and carry["base_trajectory"] == str(layout.dataset("demos"))
+    predictor = yaml.safe_load(texts["predictor_horizon"])
+    assert predictor["data"]["dataset"] == str(layout.dataset("spillage_carry")) and predictor["data"]["label"] == "horizon"
+    evaluate = yaml.safe_load(texts["evaluate"])
+    assert evaluate["checkpoints"]["predictor_horizon"] == str(layout.predictor_dir("predictor_horizon") / "best.pt")
+    assert evaluate["checkpoints"]["predictor"] is None  # no chunk-label predictor stage in this pipeline
+
+
+@pytest.mark.parametrize("stage, config_file, fragment", [
+    ("spillage_carry", "experiments/spillage_cpu.yaml", "the spillage_carry stage collects trials that end with the evaluation's carry"),
+    ("predictor_horizon", "experiments/predictor_cpu_carry_chunk.yaml", "needs `data.label: horizon`, not 'chunk'"),
+])
+def test_a_carry_stage_given_the_wrong_kind_of_config_fails_before_anything_runs(tmp_path, capsys, stage, config_file, fragment):
+    pipeline = _carry_pipeline(tmp_path, **{stage: config_file})
+    assert main(["pipeline", str(pipeline), "--no-progress"]) == 2
+    err = [line for line in capsys.readouterr().err.strip().splitlines() if "error" in line]
+    assert len(err) == 1 and fragment in err[0] and f"stage `{stage}`" in err[0]
+    assert not (tmp_path / "run").exists()
