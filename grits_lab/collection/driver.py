@@ -211,13 +211,13 @@ class Progress:
         self.bar.close()
 
 
-def refuse_empty(desc: str, episodes: int, failed: int, first_error: str, failures_dir: Path) -> None:
+def refuse_empty(desc: str, writer: DatasetWriter, episodes: int, failed: int, first_error: str) -> None:
     """JobError when a job ends with no episode at all and this run's episodes failed: a broken
     installation or world (a missing library, a bad food file) stops the job here with its first
     error, instead of leaving an empty dataset for the next stage to trip on. A dataset with some
     episodes goes on (its failures are counted in the summary and retried by a rerun)."""
     if episodes == 0 and failed > 0:
-        raise JobError(f"{desc}: every episode failed ({failed}); the first with {first_error} (tracebacks in {failures_dir})")
+        raise JobError(f"{desc}: every episode failed ({failed}); the first with {first_error} (tracebacks in {writer.out_dir / FAILURE_DIR})")
 
 
 def run_fixed_job(
@@ -258,5 +258,5 @@ def run_fixed_job(
         "wall_time_s_this_time": round(time.perf_counter() - start, 2),
     }
     writer.finalize(summary, complete=finished == len(specs))
-    refuse_empty(desc, finished, failed, first_error, writer.out_dir / FAILURE_DIR)
+    refuse_empty(desc, writer, finished, failed, first_error)
     return summary

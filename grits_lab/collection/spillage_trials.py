@@ -293,7 +293,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
                      carry: Carry | None = None) -> dict[str, Any]:
     """Generate candidates until every (shape, `balance_on` label) bucket is full; write accepted trials."""
     from grits_lab.collection.balance import BalancedAcceptor
-    from grits_lab.collection.driver import FAILURE_DIR, Progress, failure_details, refuse_empty
+    from grits_lab.collection.driver import Progress, failure_details, refuse_empty
 
     targets = config.targets()
     per_shape = config.episodes // len(config.shapes)
@@ -350,7 +350,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
                 writer.write_failure(result.episode_id, failure_details(result))
 
     in_flight: dict[str, str] = {}
-    ran = {"failed": 0, "first_error": ""}  # this run's own trials, not the resumed log's
+    failed_now, first_error = 0, ""  # this run's own trials, not the resumed log's
     try:
         while not acceptor.done():
             while executor.capacity() > 0:
@@ -374,8 +374,8 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
                 else:
                     label, payload = None, None
                     writer.write_failure(result.episode_id, failure_details(result))
-                    ran["failed"] += 1
-                    ran["first_error"] = ran["first_error"] or result.error
+                    failed_now += 1
+                    first_error = first_error or result.error
                 decide(acceptor.add(shape, index, label, payload), from_log=False)
     finally:
         bar.close()
@@ -396,7 +396,7 @@ def run_spillage_job(config: SpillageConfig, executor: Any, writer: Any, base: n
     }
     on_disk_now = len(list(writer.out_dir.glob("episodes/*.npz")))  # a trial that failed to regenerate is missing
     writer.finalize(summary, complete=all(acceptor.full(s) for s in config.shapes) and on_disk_now == accepted)
-    refuse_empty("spillage", accepted, ran["failed"], ran["first_error"], writer.out_dir / FAILURE_DIR)
+    refuse_empty("spillage", writer, accepted, failed_now, first_error)
     return summary
 
 

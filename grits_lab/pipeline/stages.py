@@ -19,6 +19,7 @@ import yaml
 
 from grits_lab.config import merge_mappings
 from grits_lab.errors import ConfigError, InputError
+from grits_lab.pipeline.pipeline_config import STAGE_ORDER
 
 
 @dataclass(frozen=True)
@@ -89,7 +90,7 @@ def predictor_checkpoint(layout: Layout, stage: str) -> Path:
 
 
 COLLECT_STAGES = ("demos", "spillage", "spillage_heldout", "spillage_carry")
-PREDICTOR_STAGES = ("predictor", "predictor_raw", "predictor_pointnet2", "predictor_horizon")
+PREDICTOR_STAGES = tuple(stage for stage in STAGE_ORDER if stage.startswith("predictor"))
 
 
 def predictor_dataset(stage: str) -> str:
@@ -283,7 +284,7 @@ def _run_predictor(stage: str, config: Any, layout: Layout, progress: bool) -> d
 
     summary = train_predictor(config, progress=progress)
     heldout = layout.dataset("spillage_heldout")
-    if predictor_dataset(stage) == "spillage" and (heldout / "index.parquet").exists() or (heldout / "episodes").is_dir():
+    if predictor_dataset(stage) == "spillage" and ((heldout / "index.parquet").exists() or (heldout / "episodes").is_dir()):
         predictor = load_predictor(predictor_checkpoint(layout, stage))
         summary = {**summary, "heldout": evaluate_predictor(predictor, heldout)}
     return summary
@@ -312,10 +313,7 @@ def _run_report(stage: str, data: Any, layout: Layout, progress: bool) -> dict[s
 
 
 _LOADERS: dict[str, Callable[[Path], Any]] = {
-    "demos": _load_collect,
-    "spillage": _load_collect,
-    "spillage_heldout": _load_collect,
-    "spillage_carry": _load_collect,
+    **{stage: _load_collect for stage in COLLECT_STAGES},
     "policy": _load_policy,
     "bc": _load_bc,
     "predictor": _load_predictor,
@@ -325,10 +323,7 @@ _LOADERS: dict[str, Callable[[Path], Any]] = {
 }
 
 _RUNNERS: dict[str, Callable[[str, Any, Layout, bool], dict[str, Any]]] = {
-    "demos": _run_collect,
-    "spillage": _run_collect,
-    "spillage_heldout": _run_collect,
-    "spillage_carry": _run_collect,
+    **{stage: _run_collect for stage in COLLECT_STAGES},
     "policy": _run_policy,
     "bc": _run_bc,
     "predictor": _run_predictor,
