@@ -2,7 +2,13 @@
 and compared. A change that moves one changes a result: bump the protocol (docs/protocol.md).
 
 Integers, booleans and strings must match exactly; floats within FLOAT_TOLERANCE (cross-CPU float
-noise); columns that measure time are left out. Regenerate, after bumping the version, with
+noise), or within CHAOTIC_TOLERANCE for the columns that amplify that noise; columns that measure
+time are left out. NumPy and OpenBLAS pick their SIMD kernels by CPU, so the arm's commands can
+differ by ~1e-12 between machines; contact turns that into particle positions a fraction of a
+millimetre apart. Measured between the machine that made the records and an AVX2-only AMD EPYC on
+`expert_task_episode` (every integer equal, scoop_max_joint_speed_ratio 2.7e-12 relative): carry_peak_speed_mps 2.9e-5 relative, carry_peak_spoon_accel_mps2 (a second difference)
+8.3e-4, spoon_coverage (cells of a 1 mm grid under the particles' footprints) 2.0e-2, ten cells of
+1249. Regenerate, after bumping the version, with
 
     GRITS_LAB_REGENERATE_GOLDEN=1 python -m pytest tests/test_golden_records.py -q
 """
@@ -23,7 +29,8 @@ from grits_lab.versions import PROTOCOL, PROTOCOL_VERSION
 ARTIFACTS = Path(__file__).parent / "artifacts"
 REGENERATE = os.environ.get("GRITS_LAB_REGENERATE_GOLDEN") == "1"
 COMMAND = "GRITS_LAB_REGENERATE_GOLDEN=1 python -m pytest tests/test_golden_records.py -q"
-FLOAT_TOLERANCE = 1e-6
+FLOAT_TOLERANCE = 1e-4
+CHAOTIC_TOLERANCE = {"spoon_coverage": 0.05, "carry_peak_spoon_accel_mps2": 0.01}
 TIMING = {"wall_time_s", "settle_time_s", "scoop_time_s", "transfer_time_s", "plan_time_mean_s", "plan_time_max_s"}
 FOOD, LEVEL, SEED = "chocolate_balls", "low", 3
 
@@ -51,7 +58,8 @@ def _differences(golden: Any, now: Any, where: str = "") -> list[str]:
             return [f"{where}: {len(golden)} entries in the golden record, {len(now)} now"]
         return [d for i, (g, n) in enumerate(zip(golden, now)) for d in _differences(g, n, f"{where}[{i}]")]
     exact = isinstance(golden, (bool, int, str)) or golden is None or isinstance(now, (bool, str)) or now is None
-    if exact and golden != now or not exact and not math.isclose(golden, now, rel_tol=FLOAT_TOLERANCE, abs_tol=FLOAT_TOLERANCE):
+    tolerance = CHAOTIC_TOLERANCE.get(where.rsplit(".", 1)[-1], FLOAT_TOLERANCE)
+    if exact and golden != now or not exact and not math.isclose(golden, now, rel_tol=tolerance, abs_tol=FLOAT_TOLERANCE):
         return [f"{where}: {golden!r} in the golden record, {now!r} now"]
     return []
 
@@ -184,6 +192,15 @@ GOLDEN: dict[str, Callable[[Path], dict[str, Any]]] = {
     "spillage_trial.json": spillage_trial,
     "tiny_policy_task_episode.json": tiny_policy_task_episode,
 }
+
+
+def test_the_comparison_forgives_cpu_noise_and_nothing_larger():
+    golden = {"spilled": 3, "carry_peak_speed_mps": 0.1182731, "spoon_coverage": 0.4083, "ok": True}
+    assert _differences(golden, {**golden, "carry_peak_speed_mps": 0.1182765, "spoon_coverage": 0.4003}) == []
+    assert _differences(golden, {**golden, "spilled": 4}) == [".spilled: 3 in the golden record, 4 now"]
+    assert len(_differences(golden, {**golden, "carry_peak_speed_mps": 0.1192})) == 1  # 0.8 %: a moved result
+    assert len(_differences(golden, {**golden, "spoon_coverage": 0.36})) == 1  # 12 %: a different scoop
+    assert len(_differences(golden, {**golden, "ok": False})) == 1
 
 
 @pytest.mark.parametrize("name", sorted(GOLDEN))
