@@ -28,7 +28,7 @@ from grits_lab.errors import InputError
 from grits_lab.intervals import format_percent
 from grits_lab.markdown import markdown_table
 from grits_lab.records import OUTCOME_COLUMNS
-from grits_lab.report.run_compare import COMPARISON_FILE, comparison_markdown
+from grits_lab.report.run_compare import COMPARISON_FILE, PAIRED_METHODS_FILE, comparison_markdown, paired_methods_markdown
 from grits_lab.report.spill_tables import CAUSE_NAMES, STAGE_NAMES
 from grits_lab.report.summary import CLAIMS_FILE, PROVENANCE_FILE, STAGES_FILE, SUMMARY_FILE
 from grits_lab.report.vocabulary import MAIN_METHODS, PAPER_RESULTS
@@ -231,6 +231,13 @@ def comparison_block(root: Path, name: str, here: Path) -> str:
     return f"{comparison_markdown(table)} File: [{COMPARISON_FILE}]({_link(root, name, COMPARISON_FILE, here)})."
 
 
+def paired_block(root: Path, name: str, here: Path) -> str:
+    """Every method against Diffusion Policy on the same episodes, as the summary holds it (paired.csv)."""
+    table = pd.read_csv(_folder(root, name, needs=PAIRED_METHODS_FILE) / PAIRED_METHODS_FILE)
+    head, rows, caption = paired_methods_markdown(table)
+    return f"{markdown_table(head, rows)}\n\n{caption} File: [{PAIRED_METHODS_FILE}]({_link(root, name, PAIRED_METHODS_FILE, here)})."
+
+
 def index_block(root: Path, name: str | None, here: Path) -> str:
     """Every experiment folder: its page's title, protocol and episodes per method."""
     rows = []
@@ -255,6 +262,7 @@ BLOCKS: dict[str, Callable[[Path, str, Path], str]] = {
     "headline": headline_block,
     "claims": claims_block,
     "comparison": comparison_block,
+    "paired": paired_block,
     "index": index_block,
 }
 

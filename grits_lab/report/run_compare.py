@@ -6,6 +6,9 @@ method the table gives the paired episodes, how many scoops are equal (every col
 `SCOOP_COLUMNS` equal), and for each outcome of `PAIRED_OUTCOMES` its count in each run, the
 episodes where only one run had it, and the exact two-sided sign test (McNemar's exact test) on
 those discordant pairs.
+
+`compare_methods` pairs the methods of one run the same way: every method against a reference
+method (Diffusion Policy) on the episodes both ran, the report's "Paired with Diffusion Policy".
 """
 
 from __future__ import annotations
@@ -20,10 +23,13 @@ from grits_lab.io import write_text_atomic
 from grits_lab.markdown import markdown_table
 from grits_lab.report.run_records import load_run
 from grits_lab.report.spill_tables import delivered_share, has_attribution, lifted_episodes, spilled_after_scoop
+from grits_lab.report.tables import ReportTable
 from grits_lab.report.vocabulary import method_display
 
 PAIR_KEYS = ("method", "food", "level", "trial")
 COMPARISON_FILE = "comparison.csv"
+PAIRED_METHODS_FILE = "paired.csv"
+PAIR_REFERENCE = "dp"  # the unguided policy every guided variant is compared with
 # What the scoop ended with: equal in both runs means the scoop was not changed.
 SCOOP_COLUMNS = ("scooped", "spilled", "scoop_success", "scoop_steps")
 # Outcome -> its name in the table. spill_after_scoop: a particle lost in the lift, carry, pour or after it;
@@ -109,8 +115,9 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
         errors = pairs["is_error_before"] | pairs["is_error_after"]
         pairs = pairs[~errors]
         same = pd.Series(True, index=pairs.index)
-        for column in SCOOP_COLUMNS:
-            same &= _equal(pairs[f"{column}_before"], pairs[f"{column}_after"])
+        for column in SCOOP_COLUMNS:  # two runs' records always hold them (_episodes); a run's own methods may lack some
+            if f"{column}_before" in pairs.columns:
+                same &= _equal(pairs[f"{column}_before"], pairs[f"{column}_after"])
         row = {"method": method, "paired": int(len(pairs)), "errors": int(errors.sum()), "scoop_equal": int(same.sum())}
         for outcome in PAIRED_OUTCOMES:
             a, b = pairs[f"{outcome}_before"].astype(bool), pairs[f"{outcome}_after"].astype(bool)
@@ -119,6 +126,57 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
             row[f"{outcome}_p"] = sign_test_p(row[f"{outcome}_only_before"], row[f"{outcome}_only_after"])
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def compare_methods(frame: pd.DataFrame, reference: str = PAIR_REFERENCE) -> pd.DataFrame:
+    """Every other method of one run's normalized records (`run_records.normalize_records`) against
+    `reference` on the episodes both ran (food, level, trial and seed): `compare_runs`'s columns with
+    the reference as "before", plus `reference`. Empty when the records lack the reference, the
+    per-stage spill columns or any shared episode, or hold a method at several guidance settings
+    (a sweep: no one episode per seed to pair)."""
+    if frame is None or frame.empty or "method" not in frame.columns or not has_attribution(frame):
+        return pd.DataFrame()
+    if (frame["method"] != reference).all() or frame.duplicated(list(PAIR_KEYS)).any():
+        return pd.DataFrame()
+    frame = with_paired_outcomes(frame)
+    base = frame[frame["method"] == reference]
+    tables = []
+    for method in dict.fromkeys(frame["method"]):
+        if method == reference:
+            continue
+        try:
+            tables.append(compare_runs(base.assign(method=method), frame[frame["method"] == method]))
+        except InputError:  # no episode of this method on the reference's seeds
+            continue
+    if not tables:
+        return pd.DataFrame()
+    table = pd.concat(tables, ignore_index=True)
+    table.insert(0, "reference", reference)
+    return table
+
+
+def paired_methods_markdown(table: pd.DataFrame) -> tuple[list[str], list[list[str]], str]:
+    """(header, rows, caption) of `compare_methods`'s table: per method, the reference's count →
+    the method's on the same episodes, the discordant pairs and the sign test."""
+    reference = method_display(str(table["reference"].iloc[0]))
+    head = ["Method", "Paired episodes"] + [PAIRED_OUTCOMES[o] for o in PAIRED_OUTCOMES]
+    rows = [[method_display(row["method"]), str(row["paired"])]
+            + [f"{row[f'{o}_before']} → {row[f'{o}_after']} (−{row[f'{o}_only_before']} +{row[f'{o}_only_after']}, "
+               f"p {row[f'{o}_p']:.2g})" for o in PAIRED_OUTCOMES] for _, row in table.iterrows()]
+    caption = (f"Episodes with each outcome, {reference} → the method, on the episodes both ran (same food, level, trial "
+               f"and seed); (−a +b): episodes that had it only with {reference}, only with the method; p: exact two-sided "
+               "sign test (McNemar's exact test) on those. Episodes with an error in either are left out.")
+    return head, rows, caption
+
+
+def paired_methods_table(episodes: pd.DataFrame | None, reference: str = PAIR_REFERENCE) -> ReportTable | None:
+    """The report's "Paired with Diffusion Policy" table, or None when `compare_methods` pairs nothing."""
+    table = compare_methods(episodes, reference) if episodes is not None else pd.DataFrame()
+    if table.empty:
+        return None
+    head, rows, caption = paired_methods_markdown(table)
+    return ReportTable("paired_methods", f"Paired with {method_display(reference)}: the same episodes, outcome by outcome",
+                       caption, pd.DataFrame(rows, columns=head), table)
 
 
 def comparison_markdown(table: pd.DataFrame) -> str:

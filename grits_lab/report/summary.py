@@ -5,6 +5,7 @@
     summary.csv       one row per method and outcome: k, n, rate, Wilson 95 % bounds (OUTCOMES)
     stage_cause.csv   one row per method, stage and cause: episodes with such a spill, particles
     claims.csv        the paper's claims beside these records (the report's claims table), when they hold its methods
+    paired.csv        every method against Diffusion Policy on the episodes both ran (run_compare.compare_methods)
     provenance.json   protocol, commits, machine, dates, wall time, checkpoint digests, episodes per method
     config.yaml       the run's config as it ran (RUN_DIR/config.yaml)
 
@@ -26,6 +27,7 @@ import pandas as pd
 from grits_lab.intervals import rate
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
 from grits_lab.records import OUTCOME_COLUMNS
+from grits_lab.report.run_compare import PAIRED_METHODS_FILE, compare_methods
 from grits_lab.report.run_records import RunData
 from grits_lab.report.spill_tables import (AFTER_SCOOP, DELIVERED_SHARE, attribution_counts, delivered_share, has_attribution,
                                            lifted_episodes, spill_attribution_table, spilled_after_scoop)
@@ -138,8 +140,9 @@ def summary_provenance(run: RunData, command: str) -> dict[str, Any]:
 
 
 def write_summary(run: RunData, out_dir: str | Path, command: str) -> list[Path]:
-    """Write summary.csv, stage_cause.csv, claims.csv, provenance.json and config.yaml into `out_dir`
-    (a claims.csv left by an earlier summary of other records is removed when these hold none of the paper's methods)."""
+    """Write summary.csv, stage_cause.csv, claims.csv, paired.csv, provenance.json and config.yaml into
+    `out_dir` (a claims.csv or paired.csv left by an earlier summary of other records is removed when
+    these hold none of the paper's methods, or no method to pair with Diffusion Policy)."""
     from grits_lab.errors import InputError
 
     if run.episodes is None or run.episodes.empty:
@@ -153,8 +156,14 @@ def write_summary(run: RunData, out_dir: str | Path, command: str) -> list[Path]
     for name, frame in tables:
         write_text_atomic(out / name, frame.to_csv(index=False, lineterminator="\n"))
         files.append(out / name)
-    if CLAIMS_FILE not in dict(tables):
-        (out / CLAIMS_FILE).unlink(missing_ok=True)
+    paired = compare_methods(run.episodes)
+    if not paired.empty:
+        tables.append((PAIRED_METHODS_FILE, paired))
+        write_text_atomic(out / PAIRED_METHODS_FILE, paired.to_csv(index=False, lineterminator="\n"))
+        files.append(out / PAIRED_METHODS_FILE)
+    for name in (CLAIMS_FILE, PAIRED_METHODS_FILE):
+        if name not in dict(tables):
+            (out / name).unlink(missing_ok=True)
     write_json_atomic(out / PROVENANCE_FILE, summary_provenance(run, command))
     files.append(out / PROVENANCE_FILE)
     config = (run.run_dir if run.run_dir.is_dir() else run.run_dir.parent) / CONFIG_FILE

@@ -94,3 +94,42 @@ def test_an_experiment_page_renders_the_comparison_written_into_its_folder(tmp_p
     page = render_all(tmp_path)[folder / "README.md"]
     assert "| Diffusion Policy | 2 | 2/2 | 1 → 2 (−0 +1, p 1) |" in page
     assert "v1 → v2, on the same seeds" in page and "[comparison.csv](comparison.csv)" in page
+
+
+def test_every_method_is_paired_with_dp_on_the_episodes_both_ran(tmp_path):
+    from grits_lab.report.build import build_report
+    from grits_lab.report.results_pages import render_all
+    from grits_lab.report.run_compare import compare_methods
+    from grits_lab.report.run_records import load_run
+    from grits_lab.report.summary import write_summary
+
+    rows = []
+    for method, outcomes in (("dp", ["spill", "spill", "success", "success"]),
+                             ("grits", ["success", "spill", "success", "scoop_fail", "success"])):
+        for trial, outcome in enumerate(outcomes):  # grits's trial 4 has no dp episode to pair with
+            row = episode(method, "sago", "low", trial, outcome)
+            row.update({c: 0 for c in attribution_columns()}, scoop_steps=40)
+            rows.append(row)
+    run = tmp_path / "run"
+    run.mkdir()
+    pd.DataFrame(rows).to_parquet(run / "episodes.parquet")
+    table = compare_methods(load_run(run).episodes)
+    row = table.set_index("method").loc["grits"]
+    assert row["reference"] == "dp" and row["paired"] == 4
+    assert (row["spillage_before"], row["spillage_after"], row["spillage_only_before"], row["spillage_only_after"]) == (2, 1, 1, 0)
+    assert (row["scoop_failure_only_before"], row["scoop_failure_only_after"]) == (0, 1)
+    assert (row["task_success_before"], row["task_success_after"]) == (2, 2)
+    assert (row["task_success_only_before"], row["task_success_only_after"]) == (1, 1)
+    assert "dp" not in set(table["method"])
+    # Without the reference there is nothing to pair.
+    assert compare_methods(load_run(run).episodes.query("method != 'dp'")).empty
+
+    build_report(run, tmp_path / "report")
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "## Paired with Diffusion Policy" in text and "| 2 → 1 (−1 +0, p 1) " in text
+    folder = tmp_path / "docs" / "experiments" / "pair"
+    write_summary(load_run(run), folder, "grits-lab report run --summary-to docs/experiments/pair")
+    assert (folder / "paired.csv").is_file()
+    (folder / "README.md").write_text("# Pair\n\n<!-- generated: paired pair -->\n<!-- end generated -->\n")
+    page = render_all(tmp_path)[folder / "README.md"]
+    assert "| GRITS | 4 | 2 → 2 (−1 +1, p 1) | 2 → 1 (−1 +0, p 1) |" in page
