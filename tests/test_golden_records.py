@@ -6,9 +6,9 @@ noise), or within CHAOTIC_TOLERANCE for the columns that amplify that noise; col
 time are left out. NumPy and OpenBLAS pick their SIMD kernels by CPU, so the arm's commands can
 differ by ~1e-12 between machines; contact turns that into particle positions a fraction of a
 millimetre apart. Measured between the machine that made the records and an AVX2-only AMD EPYC on
-`expert_task_episode` (every integer equal, scoop_max_joint_speed_ratio 2.7e-12 relative): carry_peak_speed_mps 2.9e-5 relative, carry_peak_spoon_accel_mps2 (a second difference)
-8.3e-4, spoon_coverage (cells of a 1 mm grid under the particles' footprints) 2.0e-2, ten cells of
-1249. Regenerate, after bumping the version, with
+`expert_task_episode` (every integer equal, scoop_max_joint_speed_ratio 2.7e-12 relative):
+carry_peak_speed_mps 2.9e-5 relative, carry_peak_spoon_accel_mps2 (a second difference) 8.3e-4,
+spoon_coverage (cells of a 1 mm grid under the particles' footprints) 2.0e-2, ten cells of 1249. Regenerate, after bumping the version, with
 
     GRITS_LAB_REGENERATE_GOLDEN=1 python -m pytest tests/test_golden_records.py -q
 """

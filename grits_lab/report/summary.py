@@ -153,14 +153,11 @@ def write_summary(run: RunData, out_dir: str | Path, command: str) -> list[Path]
     tables = [(SUMMARY_FILE, summary_table(run.episodes)), (STAGES_FILE, stage_cause_table(run.episodes))]
     if run.episodes["method"].isin(MAIN_METHODS).any():  # the paper's claims concern its methods, not the oracle
         tables.append((CLAIMS_FILE, claims_table(run.episodes).display))
+    if not (paired := compare_methods(run.episodes)).empty:
+        tables.append((PAIRED_METHODS_FILE, paired))
     for name, frame in tables:
         write_text_atomic(out / name, frame.to_csv(index=False, lineterminator="\n"))
         files.append(out / name)
-    paired = compare_methods(run.episodes)
-    if not paired.empty:
-        tables.append((PAIRED_METHODS_FILE, paired))
-        write_text_atomic(out / PAIRED_METHODS_FILE, paired.to_csv(index=False, lineterminator="\n"))
-        files.append(out / PAIRED_METHODS_FILE)
     for name in (CLAIMS_FILE, PAIRED_METHODS_FILE):
         if name not in dict(tables):
             (out / name).unlink(missing_ok=True)
