@@ -22,7 +22,8 @@ from grits_lab.errors import InputError
 from grits_lab.io import write_text_atomic
 from grits_lab.markdown import markdown_table
 from grits_lab.report.run_records import load_run
-from grits_lab.report.spill_tables import delivered_share, has_attribution, lifted_episodes, spilled_after_scoop
+from grits_lab.report.spill_tables import (delivered_share, has_attribution, lifted_episodes, spilled_after_scoop,
+                                           spilled_before_pour)
 from grits_lab.report.tables import ReportTable
 from grits_lab.report.vocabulary import method_display
 
@@ -33,12 +34,14 @@ PAIR_REFERENCE = "dp"  # the unguided policy every guided variant is compared wi
 # What the scoop ended with: equal in both runs means the scoop was not changed.
 SCOOP_COLUMNS = ("scooped", "spilled", "scoop_success", "scoop_steps")
 # Outcome -> its name in the table. spill_after_scoop: a particle lost in the lift, carry, pour or after it;
+# spill_before_pour: a particle lost in the scoop, lift or carry (what the scoop causes, spill_tables.BEFORE_POUR);
 # lifted_food_delivered: food lifted and at least DELIVERED_SHARE of it in the target bowl with nothing
 # spilled after the scoop (the oracle's goal, spill_tables.delivered_share).
 PAIRED_OUTCOMES = {
     "task_success": "task success",
     "spillage": "spill during the scoop",
     "spill_after_scoop": "spill after the scoop",
+    "spill_before_pour": "spill before the pour",
     "scoop_failure": "scoop failure",
     "lifted_food_delivered": "lifted food delivered",
 }
@@ -76,10 +79,11 @@ def _episodes(run_dir: str | Path) -> pd.DataFrame:
 def with_paired_outcomes(frame: pd.DataFrame) -> pd.DataFrame:
     """A copy of normalized records (`run_records.normalize_records`, with the attribution columns)
     with the outcomes `PAIRED_OUTCOMES` names that the records do not hold themselves:
-    `spill_after_scoop` and `lifted_food_delivered` (False for an episode that lifted nothing or
-    ended with an error)."""
+    `spill_after_scoop`, `spill_before_pour` and `lifted_food_delivered` (False for an episode that
+    lifted nothing or ended with an error)."""
     frame = frame.copy()
     frame["spill_after_scoop"] = spilled_after_scoop(frame) > 0
+    frame["spill_before_pour"] = spilled_before_pour(frame) > 0
     lifted = frame.index.isin(lifted_episodes(frame).index)
     frame["lifted_food_delivered"] = lifted & delivered_share(frame)[1].fillna(False).astype(bool)
     return frame
@@ -155,14 +159,25 @@ def compare_methods(frame: pd.DataFrame, reference: str = PAIR_REFERENCE) -> pd.
     return table
 
 
+def _held_outcomes(table: pd.DataFrame) -> list[str]:
+    """The outcomes of PAIRED_OUTCOMES that `table` holds (a table written before an outcome existed lacks it)."""
+    return [o for o in PAIRED_OUTCOMES if f"{o}_before" in table.columns]
+
+
+def _paired_cell(row: pd.Series, outcome: str) -> str:
+    """"a → b (−only_before +only_after, p P)" for one outcome of one row of a paired table."""
+    return (f"{row[f'{outcome}_before']} → {row[f'{outcome}_after']} "
+            f"(−{row[f'{outcome}_only_before']} +{row[f'{outcome}_only_after']}, p {row[f'{outcome}_p']:.2g})")
+
+
 def paired_methods_markdown(table: pd.DataFrame) -> tuple[list[str], list[list[str]], str]:
     """(header, rows, caption) of `compare_methods`'s table: per method, the reference's count →
     the method's on the same episodes, the discordant pairs and the sign test."""
     reference = method_display(str(table["reference"].iloc[0]))
-    head = ["Method", "Paired episodes"] + [PAIRED_OUTCOMES[o] for o in PAIRED_OUTCOMES]
-    rows = [[method_display(row["method"]), str(row["paired"])]
-            + [f"{row[f'{o}_before']} → {row[f'{o}_after']} (−{row[f'{o}_only_before']} +{row[f'{o}_only_after']}, "
-               f"p {row[f'{o}_p']:.2g})" for o in PAIRED_OUTCOMES] for _, row in table.iterrows()]
+    outcomes = _held_outcomes(table)
+    head = ["Method", "Paired episodes"] + [PAIRED_OUTCOMES[o] for o in outcomes]
+    rows = [[method_display(row["method"]), str(row["paired"])] + [_paired_cell(row, o) for o in outcomes]
+            for _, row in table.iterrows()]
     caption = (f"Episodes with each outcome, {reference} → the method, on the episodes both ran (same food, level, trial "
                f"and seed); (−a +b): episodes that had it only with {reference}, only with the method; p: exact two-sided "
                "sign test (McNemar's exact test) on those. Episodes with an error in either are left out.")
@@ -182,15 +197,10 @@ def paired_methods_table(episodes: pd.DataFrame | None, reference: str = PAIR_RE
 def comparison_markdown(table: pd.DataFrame) -> str:
     """The comparison (`compare_run_dirs`'s table, which names its runs) as a Markdown table with its caption."""
     before, after = str(table["before"].iloc[0]), str(table["after"].iloc[0])
-    outcomes = [o for o in PAIRED_OUTCOMES if f"{o}_before" in table.columns]  # a comparison written before an outcome existed lacks it
+    outcomes = _held_outcomes(table)
     head = ["Method", "Paired", "Scoop equal"] + [PAIRED_OUTCOMES[o] for o in outcomes]
-    rows = []
-    for _, row in table.iterrows():
-        cells = [method_display(row["method"]), str(row["paired"]), f"{row['scoop_equal']}/{row['paired']}"]
-        for outcome in outcomes:
-            cells.append(f"{row[f'{outcome}_before']} → {row[f'{outcome}_after']} "
-                         f"(−{row[f'{outcome}_only_before']} +{row[f'{outcome}_only_after']}, p {row[f'{outcome}_p']:.2g})")
-        rows.append(cells)
+    rows = [[method_display(row["method"]), str(row["paired"]), f"{row['scoop_equal']}/{row['paired']}"]
+            + [_paired_cell(row, o) for o in outcomes] for _, row in table.iterrows()]
     lines = [markdown_table(head, rows), ""]
     lines.append(f"Episodes with each outcome, {before} → {after}, on the same seeds; (−a +b): episodes that had it only "
                  "in the first run, only in the second; p: exact two-sided sign test on those. Scoop equal: scooped, "

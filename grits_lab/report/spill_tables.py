@@ -27,6 +27,9 @@ CAUSE_NAMES = {
 }
 STAGE_NAMES = {"scoop": "Scoop", "lift": "Lift", "carry": "Carry", "pour": "Pour", "after_pour": "After the pour"}
 AFTER_SCOOP = SPILL_STAGES[1:]
+# The stages whose losses the scoop causes: the scoop itself, and the lift and carry of the load it left
+# (a heap above the rim sheds there); the pour and after it are the task's scripted delivery.
+BEFORE_POUR = ("scoop", "lift", "carry")
 # Delivered: at least this share of the lifted load ends in the target bowl, nothing spilled after the scoop.
 DELIVERED_SHARE = 0.9
 
@@ -43,10 +46,21 @@ def attribution_counts(rows: pd.DataFrame) -> pd.DataFrame:
     return counts
 
 
-def spilled_after_scoop(rows: pd.DataFrame) -> pd.Series:
-    """(episodes,) particles spilled in the lift, carry, pour or after it, from the attribution columns."""
+def spilled_in(rows: pd.DataFrame, stages: tuple[str, ...]) -> pd.Series:
+    """(episodes,) particles spilled in any of `stages` (names of SPILL_STAGES), from the attribution columns."""
     counts = attribution_counts(rows)
-    return counts[[c for c, (stage, _) in attribution_columns().items() if stage in AFTER_SCOOP]].sum(axis=1)
+    return counts[[c for c, (stage, _) in attribution_columns().items() if stage in stages]].sum(axis=1)
+
+
+def spilled_after_scoop(rows: pd.DataFrame) -> pd.Series:
+    """(episodes,) particles spilled in the lift, carry, pour or after it."""
+    return spilled_in(rows, AFTER_SCOOP)
+
+
+def spilled_before_pour(rows: pd.DataFrame) -> pd.Series:
+    """(episodes,) particles spilled in the scoop, lift or carry (BEFORE_POUR): the spills the scoop and the
+    load it left cause, apart from what the scripted pour loses (docs/report.md)."""
+    return spilled_in(rows, BEFORE_POUR)
 
 
 def lifted_episodes(rows: pd.DataFrame) -> pd.DataFrame:

@@ -30,7 +30,8 @@ from grits_lab.records import OUTCOME_COLUMNS
 from grits_lab.report.run_compare import PAIRED_METHODS_FILE, compare_methods
 from grits_lab.report.run_records import RunData
 from grits_lab.report.spill_tables import (AFTER_SCOOP, DELIVERED_SHARE, attribution_counts, delivered_share, has_attribution,
-                                           lifted_episodes, spill_attribution_table, spilled_after_scoop)
+                                           lifted_episodes, spill_attribution_table, spilled_after_scoop,
+                                           spilled_before_pour)
 from grits_lab.report.tables import all_variants, claims_table
 from grits_lab.report.vocabulary import MAIN_METHODS
 from grits_lab.sim.spill_metrics import stage_columns
@@ -49,6 +50,8 @@ OUTCOMES: dict[str, str] = {
     "scoop_failure": "too little lifted, of all episodes",
     "spill_after_scoop": "a particle lost after the scoop (lift, carry, pour or after it), of all episodes",
     **{f"spill_{stage}": f"a particle lost in the {stage.replace('_', ' ')}, of all episodes" for stage in AFTER_SCOOP},
+    "spill_before_pour": "a particle lost in the scoop, lift or carry (the spills the scoop and the load it left cause), "
+                         "of all episodes",
     "delivered": f"at least {DELIVERED_SHARE:.0%} of the lifted food in the target bowl and nothing lost after the scoop, "
                  "of the episodes that lifted food",
     "reach_check_failed": "no option of the transfer's reach check passed, of the transfers checked",
@@ -70,6 +73,7 @@ def summary_table(episodes: pd.DataFrame) -> pd.DataFrame:
         counts: dict[str, tuple[int, int]] = {o: (int(group[o].sum()), len(group)) for o in OUTCOME_COLUMNS}
         if attributed:
             counts["spill_after_scoop"] = (int((spilled_after_scoop(group) > 0).sum()), len(group))
+            counts["spill_before_pour"] = (int((spilled_before_pour(group) > 0).sum()), len(group))
             by_cell = attribution_counts(group)
             for stage in AFTER_SCOOP:
                 lost = by_cell[stage_columns(stage)].sum(axis=1) > 0

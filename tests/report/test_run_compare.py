@@ -133,3 +133,36 @@ def test_every_method_is_paired_with_dp_on_the_episodes_both_ran(tmp_path):
     (folder / "README.md").write_text("# Pair\n\n<!-- generated: paired pair -->\n<!-- end generated -->\n")
     page = render_all(tmp_path)[folder / "README.md"]
     assert "| GRITS | 4 | 2 → 2 (−1 +1, p 1) | 2 → 1 (−1 +0, p 1) |" in page
+
+
+def test_spills_before_the_pour_count_the_scoop_lift_and_carry_and_not_the_pour(tmp_path):
+    from grits_lab.report.run_compare import compare_methods, paired_methods_markdown
+    from grits_lab.report.run_records import load_run
+    from grits_lab.report.summary import summary_table
+
+    lost = [{}, {"spilled_scoop_over_rim": 1}, {"spilled_lift_off_spoon": 2}, {"spilled_carry_off_spoon": 1},
+            {"spilled_pour_poured_outside": 3}, {"spilled_after_pour_bounced_out": 1}]
+    rows = []
+    for method in ("dp", "grits"):
+        for trial, spilled in enumerate(lost if method == "dp" else [{}] * len(lost)):
+            row = episode(method, "sago", "low", trial, "success")
+            row.update({c: 0 for c in attribution_columns()}, scoop_steps=40, **spilled)
+            rows.append(row)
+    run = tmp_path / "run"
+    run.mkdir()
+    pd.DataFrame(rows).to_parquet(run / "episodes.parquet")
+    frame = with_paired_outcomes(load_run(run).episodes)
+    dp = frame[frame["method"] == "dp"]
+    assert dp["spill_before_pour"].tolist() == [False, True, True, True, False, False]
+    assert dp["spill_after_scoop"].tolist() == [False, False, True, True, True, True]
+    summary = summary_table(load_run(run).episodes).set_index(["method", "outcome"])
+    assert (summary.loc[("dp", "spill_before_pour"), "k"], summary.loc[("dp", "spill_before_pour"), "n"]) == (3, 6)
+    assert summary.loc[("grits", "spill_before_pour"), "k"] == 0
+    table = compare_methods(load_run(run).episodes)
+    row = table.set_index("method").loc["grits"]
+    assert (row["spill_before_pour_before"], row["spill_before_pour_after"], row["spill_before_pour_only_before"]) == (3, 0, 3)
+    head, cells, _ = paired_methods_markdown(table)
+    assert cells[0][head.index("spill before the pour")] == "3 → 0 (−3 +0, p 0.25)"
+    # A paired table written before the outcome existed still renders, without its column.
+    old = table.drop(columns=[c for c in table.columns if c.startswith("spill_before_pour")])
+    assert "spill before the pour" not in paired_methods_markdown(old)[0]
