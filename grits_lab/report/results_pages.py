@@ -8,8 +8,9 @@ A page holds generated blocks between two markers; everything outside them is ha
 
 KIND is one of BLOCKS: `outcomes`, `stages`, `provenance`, `headline` and `claims` read the
 summary files of docs/experiments/EXPERIMENT/ (grits_lab/report/summary.py); `comparison` reads
-the paired comparison `grits-lab compare-runs` writes there; `index` lists every experiment
-folder. `grits-lab results check` (and tests/report/test_results_pages.py) fails when
+the paired comparison `grits-lab compare-runs` writes there; `shift BEFORE..AFTER[+AFTER...]`
+sets each method's outcomes in one summary beside another's (a protocol before and after a change,
+whose records need not exist any more); `index` lists every experiment folder. `grits-lab results check` (and tests/report/test_results_pages.py) fails when
 a page differs from what its summaries render.
 """
 
@@ -36,7 +37,7 @@ from grits_lab.sim.spill_metrics import SPILL_CAUSES, SPILL_STAGES
 
 EXPERIMENTS_DIR = Path("docs") / "experiments"
 PAGE_FILE = "README.md"
-BLOCK = re.compile(r"(<!-- generated: (?P<kind>[a-z_]+)(?: (?P<name>[A-Za-z0-9_.-]+))? -->\n)(?P<body>.*?)(<!-- end generated -->)", re.S)
+BLOCK = re.compile(r"(<!-- generated: (?P<kind>[a-z_]+)(?: (?P<name>[A-Za-z0-9_.+-]+))? -->\n)(?P<body>.*?)(<!-- end generated -->)", re.S)
 OUTCOME_HEADERS = {
     "task_success": "Task success",
     "spillage": "Spill during the scoop",
@@ -45,6 +46,18 @@ OUTCOME_HEADERS = {
     "delivered": "Lifted food delivered",
     "reach_check_failed": "Reach check failed",
     "error": "Errors",
+}
+# The shift block's outcomes: the paper's three, then where the food was lost after the scoop, stage by stage.
+SHIFT_HEADERS = {
+    "task_success": "Task success",
+    "spillage": "Spill during the scoop",
+    "scoop_failure": "Scoop failure",
+    "spill_after_scoop": "Spill after the scoop",
+    "spill_lift": "in the lift",
+    "spill_carry": "in the carry",
+    "spill_pour": "in the pour",
+    "spill_after_pour": "after the pour",
+    "delivered": "Lifted food delivered",
 }
 
 
@@ -238,6 +251,35 @@ def paired_block(root: Path, name: str, here: Path) -> str:
     return f"{markdown_table(head, rows)}\n\n{caption} File: [{PAIRED_METHODS_FILE}]({_link(root, name, PAIRED_METHODS_FILE, here)})."
 
 
+def shift_block(root: Path, name: str, here: Path) -> str:
+    """`BEFORE..AFTER[+AFTER...]`: per method of BEFORE's summary that an AFTER summary holds (the first
+    that does), each outcome of SHIFT_HEADERS as "k/n → k/n". Unpaired: the two summaries' episodes
+    share seeds only where their pages say so."""
+    before_name, sep, after_names = name.partition("..")
+    if not sep or not after_names:
+        raise InputError(f"the shift block needs BEFORE..AFTER[+AFTER...], got `{name}`")
+    before = _summary(root, before_name)
+    afters = [(a, _summary(root, a)) for a in after_names.split("+")]
+    rows = []
+    for method, method_name in _methods(before):
+        source = next(((a, summary) for a, summary in afters if method in set(summary["method"])), None)
+        if source is None:
+            continue
+        cells = []
+        for outcome in SHIFT_HEADERS:
+            was, now = _lookup(before, method, outcome), _lookup(source[1], method, outcome)
+            cells.append(" → ".join("—" if r is None else f"{int(r['k'])}/{int(r['n'])}" for r in (was, now)))
+        rows.append([method_name, *cells, f"[{source[0]}]({os.path.relpath(root / EXPERIMENTS_DIR / source[0] / PAGE_FILE, here)})"])
+    if not rows:
+        return f"No method of {before_name} is in {', '.join(a for a, _ in afters)}."
+    table = markdown_table(["Method", *SHIFT_HEADERS.values(), "After"], rows)
+    return (f"{table}\n\nEpisodes with each outcome (k/n), [{before_name}]"
+            f"({os.path.relpath(root / EXPERIMENTS_DIR / before_name / PAGE_FILE, here)}) → the run named under After; "
+            "in the lift, carry, pour and after the pour: episodes with a particle lost in that stage (an episode may lose "
+            "food in more than one); lifted food delivered: of the episodes that lifted food. Counts from the two runs' "
+            "summaries, not paired episode by episode.")
+
+
 def index_block(root: Path, name: str | None, here: Path) -> str:
     """Every experiment folder: its page's title, protocol and episodes per method."""
     rows = []
@@ -263,6 +305,7 @@ BLOCKS: dict[str, Callable[[Path, str, Path], str]] = {
     "claims": claims_block,
     "comparison": comparison_block,
     "paired": paired_block,
+    "shift": shift_block,
     "index": index_block,
 }
 

@@ -96,3 +96,28 @@ def test_a_block_names_the_command_that_writes_a_missing_summary_and_refuses_an_
     results.write_text("<!-- generated: outcomes nothing -->\n<!-- end generated -->\n")
     with pytest.raises(InputError, match=r"no experiment `nothing`: .*docs/experiments/nothing does not exist"):
         render_all(tmp_path)
+
+
+def test_a_shift_block_sets_each_methods_counts_before_beside_after(tmp_path):
+    run = _records(tmp_path)
+    docs = tmp_path / "docs" / "experiments"
+    assert main(["report", str(run), "--output-dir", str(tmp_path / "r1"), "--summary-to", str(docs / "before")]) == 0
+    after = pd.read_parquet(run / "episodes.parquet")
+    after = after[after["method"] == "dp"].copy()
+    after["spilled_carry_off_spoon"] = 0  # the carry no longer loses food: that episode now succeeds
+    after.loc[after["trial"] == 2, ["outcome", "task_success", "transferred"]] = ["success", True, 20]
+    (tmp_path / "run2").mkdir()
+    after.to_parquet(tmp_path / "run2" / "episodes.parquet")
+    assert main(["report", str(tmp_path / "run2"), "--output-dir", str(tmp_path / "r2"), "--summary-to", str(docs / "after")]) == 0
+    (docs / "after" / "README.md").write_text("# After\n\n<!-- generated: shift before..after -->\n<!-- end generated -->\n")
+    page = render_all(tmp_path)[docs / "after" / "README.md"]
+    # dp: success 1/3 → 2/3, carry 1/3 → 0/3; grits is in no after run, so it has no row.
+    assert "| Diffusion Policy | 1/3 → 2/3 | 1/3 → 1/3 | 0/3 → 0/3 | 1/3 → 0/3 | 0/3 → 0/3 | 1/3 → 0/3 |" in page
+    assert "GRITS" not in page.split("<!-- end generated -->")[0].split("shift before..after")[1]
+    # Methods missing from the first run after are taken from the next: grits from `before` itself.
+    (docs / "after" / "README.md").write_text("<!-- generated: shift before..after+before -->\n<!-- end generated -->\n")
+    page = render_all(tmp_path)[docs / "after" / "README.md"]
+    assert "| Diffusion Policy | 1/3 → 2/3 |" in page and "| GRITS | 0/1 → 0/1 |" in page and "[before](../before/README.md)" in page
+    (docs / "after" / "README.md").write_text("<!-- generated: shift before -->\n<!-- end generated -->\n")
+    with pytest.raises(InputError, match="BEFORE..AFTER"):
+        render_all(tmp_path)
