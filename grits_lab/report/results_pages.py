@@ -137,6 +137,17 @@ def _summary(root: Path, name: str) -> pd.DataFrame:
     return pd.read_csv(_folder(root, name) / SUMMARY_FILE, keep_default_na=False, na_values=[""])
 
 
+def _merged_summary(root: Path, names: str) -> pd.DataFrame:
+    """The summaries of `NAME+NAME...` as one, each method's rows from the first summary holding it
+    (a protocol whose methods were run into several experiments)."""
+    parts, seen = [], set()
+    for name in names.split("+"):
+        summary = _summary(root, name)
+        parts.append(summary[~summary["method"].isin(seen)])
+        seen |= set(summary["method"])
+    return pd.concat(parts, ignore_index=True)
+
+
 def _provenance(root: Path, name: str) -> dict:
     return json.loads((_folder(root, name) / PROVENANCE_FILE).read_text())
 
@@ -217,8 +228,9 @@ def provenance_block(root: Path, name: str, here: Path) -> str:
 
 
 def headline_block(root: Path, name: str, here: Path) -> str:
-    """The paper's Fig. 5 methods: episodes and the three outcomes, this simulation beside the paper's real robot."""
-    summary = _summary(root, name)
+    """The paper's Fig. 5 methods: episodes and the three outcomes, this simulation beside the paper's real robot.
+    `NAME+NAME...` takes each method from the first of the experiments that holds it."""
+    summary = _merged_summary(root, name)
     methods = dict(_methods(summary))
     order = [m for m in MAIN_METHODS if m in methods] + [m for m in methods if m not in MAIN_METHODS]
     rows = []
@@ -259,19 +271,20 @@ def shift_block(root: Path, name: str, here: Path) -> str:
     if not sep or not after_names:
         raise InputError(f"the shift block needs BEFORE..AFTER[+AFTER...], got `{name}`")
     before = _summary(root, before_name)
-    afters = [(a, _summary(root, a)) for a in after_names.split("+")]
+    afters = after_names.split("+")
+    after = _merged_summary(root, after_names)
+    source = {m: a for a in reversed(afters) for m in _summary(root, a)["method"]}  # the first that holds it
     rows = []
     for method, method_name in _methods(before):
-        source = next(((a, summary) for a, summary in afters if method in set(summary["method"])), None)
-        if source is None:
+        if method not in source:
             continue
         cells = []
         for outcome in SHIFT_HEADERS:
-            was, now = _lookup(before, method, outcome), _lookup(source[1], method, outcome)
+            was, now = _lookup(before, method, outcome), _lookup(after, method, outcome)
             cells.append(" → ".join("—" if r is None else f"{int(r['k'])}/{int(r['n'])}" for r in (was, now)))
-        rows.append([method_name, *cells, f"[{source[0]}]({os.path.relpath(root / EXPERIMENTS_DIR / source[0] / PAGE_FILE, here)})"])
+        rows.append([method_name, *cells, f"[{source[method]}]({os.path.relpath(root / EXPERIMENTS_DIR / source[method] / PAGE_FILE, here)})"])
     if not rows:
-        return f"No method of {before_name} is in {', '.join(a for a, _ in afters)}."
+        return f"No method of {before_name} is in {', '.join(afters)}."
     table = markdown_table(["Method", *SHIFT_HEADERS.values(), "After"], rows)
     return (f"{table}\n\nEpisodes with each outcome (k/n), [{before_name}]"
             f"({os.path.relpath(root / EXPERIMENTS_DIR / before_name / PAGE_FILE, here)}) → the run named under After; "

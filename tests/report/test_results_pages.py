@@ -118,6 +118,10 @@ def test_a_shift_block_sets_each_methods_counts_before_beside_after(tmp_path):
     (docs / "after" / "README.md").write_text("<!-- generated: shift before..after+before -->\n<!-- end generated -->\n")
     page = render_all(tmp_path)[docs / "after" / "README.md"]
     assert "| Diffusion Policy | 1/3 → 2/3 |" in page and "| GRITS | 0/1 → 0/1 |" in page and "[before](../before/README.md)" in page
+    # A headline over several experiments takes each method from the first that holds it.
+    (docs / "after" / "README.md").write_text("<!-- generated: headline after+before -->\n<!-- end generated -->\n")
+    page = render_all(tmp_path)[docs / "after" / "README.md"]
+    assert "| Diffusion Policy | 3 | 66.7% (2/3) |" in page and "| GRITS | 1 | 0.0% (0/1) |" in page
     (docs / "after" / "README.md").write_text("<!-- generated: shift before -->\n<!-- end generated -->\n")
     with pytest.raises(InputError, match="BEFORE..AFTER"):
         render_all(tmp_path)
