@@ -10,8 +10,9 @@ KIND is one of BLOCKS: `outcomes`, `stages`, `provenance`, `headline` and `claim
 summary files of docs/experiments/EXPERIMENT/ (grits_lab/report/summary.py); `comparison` reads
 the paired comparison `grits-lab compare-runs` writes there; `shift BEFORE..AFTER[+AFTER...]`
 sets each method's outcomes in one summary beside another's (a protocol before and after a change,
-whose records need not exist any more); `index` lists every experiment folder. `grits-lab results check` (and tests/report/test_results_pages.py) fails when
-a page differs from what its summaries render.
+whose records need not exist any more); `index` lists every experiment folder. `grits-lab results
+check` (and tests/report/test_results_pages.py) fails when a page differs from what its summaries
+render.
 """
 
 from __future__ import annotations
@@ -49,10 +50,7 @@ OUTCOME_HEADERS = {
 }
 # The shift block's outcomes: the paper's three, then where the food was lost after the scoop, stage by stage.
 SHIFT_HEADERS = {
-    "task_success": "Task success",
-    "spillage": "Spill during the scoop",
-    "scoop_failure": "Scoop failure",
-    "spill_after_scoop": "Spill after the scoop",
+    **{o: OUTCOME_HEADERS[o] for o in ("task_success", "spillage", "scoop_failure", "spill_after_scoop")},
     "spill_lift": "in the lift",
     "spill_carry": "in the carry",
     "spill_pour": "in the pour",
@@ -139,11 +137,11 @@ def _summary(root: Path, name: str) -> pd.DataFrame:
 
 def _merged_summary(root: Path, names: str) -> pd.DataFrame:
     """The summaries of `NAME+NAME...` as one, each method's rows from the first summary holding it
-    (a protocol whose methods were run into several experiments)."""
+    (a protocol whose methods were run into several experiments), in the column `experiment`."""
     parts, seen = [], set()
     for name in names.split("+"):
         summary = _summary(root, name)
-        parts.append(summary[~summary["method"].isin(seen)])
+        parts.append(summary[~summary["method"].isin(seen)].assign(experiment=name))
         seen |= set(summary["method"])
     return pd.concat(parts, ignore_index=True)
 
@@ -271,9 +269,8 @@ def shift_block(root: Path, name: str, here: Path) -> str:
     if not sep or not after_names:
         raise InputError(f"the shift block needs BEFORE..AFTER[+AFTER...], got `{name}`")
     before = _summary(root, before_name)
-    afters = after_names.split("+")
     after = _merged_summary(root, after_names)
-    source = {m: a for a in reversed(afters) for m in _summary(root, a)["method"]}  # the first that holds it
+    source = dict(zip(after["method"], after["experiment"]))
     rows = []
     for method, method_name in _methods(before):
         if method not in source:
@@ -284,7 +281,7 @@ def shift_block(root: Path, name: str, here: Path) -> str:
             cells.append(" → ".join("—" if r is None else f"{int(r['k'])}/{int(r['n'])}" for r in (was, now)))
         rows.append([method_name, *cells, f"[{source[method]}]({os.path.relpath(root / EXPERIMENTS_DIR / source[method] / PAGE_FILE, here)})"])
     if not rows:
-        return f"No method of {before_name} is in {', '.join(afters)}."
+        return f"No method of {before_name} is in {', '.join(after_names.split('+'))}."
     table = markdown_table(["Method", *SHIFT_HEADERS.values(), "After"], rows)
     return (f"{table}\n\nEpisodes with each outcome (k/n), [{before_name}]"
             f"({os.path.relpath(root / EXPERIMENTS_DIR / before_name / PAGE_FILE, here)}) → the run named under After; "

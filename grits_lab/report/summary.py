@@ -29,12 +29,11 @@ from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atom
 from grits_lab.records import OUTCOME_COLUMNS
 from grits_lab.report.run_compare import PAIRED_METHODS_FILE, compare_methods
 from grits_lab.report.run_records import RunData
-from grits_lab.report.spill_tables import (AFTER_SCOOP, DELIVERED_SHARE, attribution_counts, delivered_share, has_attribution,
+from grits_lab.report.spill_tables import (AFTER_SCOOP, DELIVERED_SHARE, delivered_share, has_attribution,
                                            lifted_episodes, spill_attribution_table, spilled_after_scoop,
-                                           spilled_before_pour)
+                                           spilled_before_pour, spilled_in)
 from grits_lab.report.tables import all_variants, claims_table
 from grits_lab.report.vocabulary import MAIN_METHODS
-from grits_lab.sim.spill_metrics import stage_columns
 from grits_lab.versions import git_commit
 
 SUMMARY_FILE = "summary.csv"
@@ -74,10 +73,8 @@ def summary_table(episodes: pd.DataFrame) -> pd.DataFrame:
         if attributed:
             counts["spill_after_scoop"] = (int((spilled_after_scoop(group) > 0).sum()), len(group))
             counts["spill_before_pour"] = (int((spilled_before_pour(group) > 0).sum()), len(group))
-            by_cell = attribution_counts(group)
             for stage in AFTER_SCOOP:
-                lost = by_cell[stage_columns(stage)].sum(axis=1) > 0
-                counts[f"spill_{stage}"] = (int(lost.sum()), len(group))
+                counts[f"spill_{stage}"] = (int((spilled_in(group, (stage,)) > 0).sum()), len(group))
             if {"scooped", "transferred"} <= set(group.columns):
                 lifted = lifted_episodes(group)
                 counts["delivered"] = (int(delivered_share(lifted)[1].sum()), len(lifted))
