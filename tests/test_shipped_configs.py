@@ -61,19 +61,23 @@ def test_the_previous_transfer_override_and_the_oracle_use_seeds_no_evaluation_u
     assert oracle.seed not in used
 
 
-def test_the_policys_training_rollouts_are_on_training_foods_and_seeds_nothing_else_uses():
+@pytest.mark.parametrize("name", ["dp_rollouts_train.yaml", "dp_rollouts_brim.yaml"])
+def test_the_policys_training_rollouts_are_on_training_foods_and_seeds_nothing_else_uses(name):
     from grits_lab.config import load_yaml
     from grits_lab.evaluation.evaluation_config import load_evaluation_config
     from grits_lab.sim.foods import load_foods
 
-    rollouts = load_evaluation_config(ROOT / "experiments" / "dp_rollouts_train.yaml")
+    rollouts = load_evaluation_config(ROOT / "experiments" / name)
     assert rollouts.methods == ["dp"] and rollouts.rollout_chunks
     assert set(rollouts.foods) <= set(load_foods().names("train"))
-    used = {load_evaluation_config(p).seed for p in (ROOT / "experiments").glob("*.yaml")
-            if "methods" in load_yaml(p) and p.name != "dp_rollouts_train.yaml"}
+    others = [p for p in (ROOT / "experiments").glob("*.yaml") if not p.name.startswith("dp_rollouts_")]
+    used = {load_evaluation_config(p).seed for p in others if "methods" in load_yaml(p)}
     used |= {load_yaml(p).get("validation", {}).get("seed") for p in (ROOT / "sweeps").glob("*.yaml")}
-    used |= {load_yaml(p).get("seed") for p in (ROOT / "experiments").glob("*.yaml") if "kind" in load_yaml(p)}  # datasets
+    used |= {load_yaml(p).get("seed") for p in others if "kind" in load_yaml(p)}  # datasets
     assert rollouts.seed not in used
+    # the rollout sets share a root seed but no level, so no episode (food, level, seed) twice
+    levels = [set(load_evaluation_config(p).levels) for p in (ROOT / "experiments").glob("dp_rollouts_*.yaml")]
+    assert sum(len(x) for x in levels) == len(set().union(*levels))
 
 
 @pytest.mark.parametrize("guidance, fragment", [

@@ -9,6 +9,7 @@ config refuses to resume unless the run is restarted.
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from pathlib import Path
@@ -68,6 +69,26 @@ def predict(model: SpillagePredictor, dataset: SpillageChunkDataset, batch_size:
     return p, y, float(sum(losses) / max(len(y), 1))
 
 
+def _untimed(history: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The history a checkpoint stores: every metric but the epochs' wall-clock `seconds`, so that the
+    same config on the same data writes a byte-identical checkpoint (its digest names it in provenance)."""
+    return [{k: v for k, v in row.items() if k != "seconds"} for row in history]
+
+
+def _timed_history(path: Path, history: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The checkpoint's `history` with the epochs' `seconds` put back from history.json, when that file
+    holds the same epochs (it is written after each checkpoint); else the checkpoint's as it is."""
+    if not path.exists():
+        return history
+    try:
+        timed = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return history
+    if len(timed) < len(history) or [r.get("epoch") for r in timed[: len(history)]] != [r["epoch"] for r in history]:
+        return history
+    return timed[: len(history)]
+
+
 def train_predictor(config: PredictorConfig, restart: bool = False, progress: bool = True) -> dict[str, Any]:
     """Train (or resume) the run of `config`; returns the best epoch's validation metrics and paths."""
     torch.set_num_threads(config.train.num_threads)
@@ -101,6 +122,7 @@ def _train_in(out: Path, config: PredictorConfig, index: Any, restart: bool, pro
         action_norm = ActionNormalizer().load_state_dict(state["action_normalizer"])
         cloud_norm = CloudNormalizer().load_state_dict(state["cloud_normalizer"])
         history, start_epoch, best_score = state["history"], int(state["epoch"]) + 1, float(state["best_score"])
+        history = _timed_history(out / "history.json", history)
     else:
         action_norm, cloud_norm = fit_normalizers(dataset_dir, split.train, cloud_key, config.data.cloud_scale)
     write_text_atomic(out / "config.yaml", yaml.safe_dump(config_to_dict(config), sort_keys=False))
@@ -141,7 +163,7 @@ def _train_in(out: Path, config: PredictorConfig, index: Any, restart: bool, pro
         improved = not math.isnan(score) and score < best_score
         if improved:
             best_score = score
-        extra = {"fingerprint": fingerprint, "optimizer": optimizer.state_dict(), "epoch": epoch, "history": history, "best_score": best_score, "split": {"train": split.train, "val": split.val}}
+        extra = {"fingerprint": fingerprint, "optimizer": optimizer.state_dict(), "epoch": epoch, "history": _untimed(history), "best_score": best_score, "split": {"train": split.train, "val": split.val}}
         ckpt = dict(config=config, model=model, action_normalizer=action_norm, cloud_normalizer=cloud_norm)
         if improved:
             save_predictor(best_path, **ckpt, extra=extra)

@@ -77,6 +77,22 @@ def test_resumed_run_equals_uninterrupted_run(tmp_path, tiny_dataset):
     assert [r["val_loss"] for r in h_a] == pytest.approx([r["val_loss"] for r in h_b], abs=1e-6)
 
 
+def test_the_same_training_writes_a_byte_identical_checkpoint_and_keeps_its_timings_beside_it(tmp_path, tiny_dataset):
+    # provenance names a checkpoint by its file digest, so the wall-clock seconds stay out of it
+    cfg = _config(tmp_path, tiny_dataset, epochs=2)
+    run = tmp_path / "runs" / "tiny"
+    train_predictor(cfg, progress=False)
+    first = {name: (run / name).read_bytes() for name in ("best.pt", "last.pt")}
+    train_predictor(cfg, restart=True, progress=False)
+    assert {name: (run / name).read_bytes() for name in ("best.pt", "last.pt")} == first
+    history = json.loads((run / "history.json").read_text())
+    assert all(r["seconds"] > 0 for r in history)
+    # a resumed run keeps the finished epochs' timings in history.json
+    train_predictor(_config(tmp_path, tiny_dataset, epochs=3), progress=False)
+    resumed = json.loads((run / "history.json").read_text())
+    assert [r["seconds"] for r in resumed[:2]] == [r["seconds"] for r in history] and resumed[2]["seconds"] > 0
+
+
 def test_split_is_by_episode_and_can_hold_out_a_shape(tiny_dataset):
     index = load_index(tiny_dataset)
     split = split_spillage_episodes(index, 0.25, seed=0)
