@@ -14,7 +14,7 @@ import pandas as pd
 
 from grits_lab.intervals import format_rate, rate
 from grits_lab.records import LOAD_ACCOUNT
-from grits_lab.report.tables import ReportTable, all_variants
+from grits_lab.report.tables import ReportTable, all_variants, attribution_counts, spilled_in
 from grits_lab.report.vocabulary import LEVEL_ORDER, food_display
 from grits_lab.sim.spill_metrics import SPILL_CAUSES, SPILL_STAGES, attribution_columns, stage_columns
 
@@ -36,20 +36,6 @@ DELIVERED_SHARE = 0.9
 
 def has_attribution(rows: pd.DataFrame) -> bool:
     return all(c in rows.columns for c in attribution_columns())
-
-
-def attribution_counts(rows: pd.DataFrame) -> pd.DataFrame:
-    """(episodes x 25) integer particle counts, columns `spilled_<stage>_<cause>`; errors count zero."""
-    counts = rows[list(attribution_columns())].apply(pd.to_numeric, errors="coerce").fillna(0).astype(int)
-    if "is_error" in rows.columns:
-        counts[rows["is_error"].to_numpy()] = 0
-    return counts
-
-
-def spilled_in(rows: pd.DataFrame, stages: tuple[str, ...]) -> pd.Series:
-    """(episodes,) particles spilled in any of `stages` (names of SPILL_STAGES), from the attribution columns."""
-    counts = attribution_counts(rows)
-    return counts[[c for c, (stage, _) in attribution_columns().items() if stage in stages]].sum(axis=1)
 
 
 def spilled_after_scoop(rows: pd.DataFrame) -> pd.Series:

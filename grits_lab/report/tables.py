@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import pandas as pd
 
 from grits_lab.records import OUTCOME_COLUMNS
-from grits_lab.sim.spill_metrics import SPILL_STAGES, attribution_columns, stage_columns
+from grits_lab.sim.spill_metrics import SPILL_STAGES, attribution_columns
 from grits_lab.intervals import Rate, format_percent, format_rate, rate
 from grits_lab.report.vocabulary import (
     ABLATION_METHODS,
@@ -388,6 +388,20 @@ def failure_stages(rows: pd.DataFrame) -> dict[str, pd.Series]:
     return masks
 
 
+def attribution_counts(rows: pd.DataFrame) -> pd.DataFrame:
+    """(episodes x 25) integer particle counts, columns `spilled_<stage>_<cause>`; errors count zero."""
+    counts = rows[list(attribution_columns())].apply(pd.to_numeric, errors="coerce").fillna(0).astype(int)
+    if "is_error" in rows.columns:
+        counts[rows["is_error"].to_numpy()] = 0
+    return counts
+
+
+def spilled_in(rows: pd.DataFrame, stages: tuple[str, ...]) -> pd.Series:
+    """(episodes,) particles spilled in any of `stages` (names of SPILL_STAGES), from the attribution columns."""
+    counts = attribution_counts(rows)
+    return counts[[c for c, (stage, _) in attribution_columns().items() if stage in stages]].sum(axis=1)
+
+
 def failure_table(episodes: pd.DataFrame | None) -> ReportTable:
     """Method x the stage that ended each episode (FAILURE_STAGES): counts of k / episodes.
 
@@ -420,8 +434,7 @@ def failure_table(episodes: pd.DataFrame | None) -> ReportTable:
         if attributed:  # the transfer's spills split by the stage that lost them (episodes with a spill there)
             parts = []
             for stage in SPILL_STAGES[1:]:
-                lost = rows[stage_columns(stage)].apply(pd.to_numeric, errors="coerce").fillna(0).sum(axis=1) > 0
-                k = int((lost & ~rows["is_error"]).sum())
+                k = int((spilled_in(rows, (stage,)) > 0).sum())
                 data[f"spill_{stage}_k"] = k
                 parts.append(f"{stage.replace('_', ' ')} {k}")
             shown["Spills after the scoop, by stage"] = " · ".join(parts)
