@@ -31,6 +31,29 @@ def auroc(prob_spill: np.ndarray, labels: np.ndarray) -> float:
     return float((ranks[pos].sum() - n_pos * (n_pos + 1) / 2.0) / (n_pos * n_neg))
 
 
+def auroc_within(prob_spill: np.ndarray, labels: np.ndarray, strata: np.ndarray) -> float:
+    """AUROC over the (spill, no-spill) pairs of the same stratum only (a stratified Mann-Whitney
+    statistic): sum_g AUROC_g * n_pos_g * n_neg_g / sum_g n_pos_g * n_neg_g; NaN if no stratum holds
+    both classes.
+
+    With strata = foods it asks whether a predictor tells a spilling chunk from a safe one of the same
+    food, which is what guidance needs; the pooled AUROC also credits knowing which foods spill more.
+    """
+    prob_spill, labels = _check(prob_spill, labels)
+    strata = np.asarray(strata).reshape(-1)
+    if strata.shape != labels.shape:
+        raise ValueError(f"strata {strata.shape} and labels {labels.shape} differ in length")
+    weighted, pairs = 0.0, 0
+    for g in np.unique(strata):
+        at = strata == g
+        n_pos = int(labels[at].sum())
+        n_pairs = n_pos * (int(at.sum()) - n_pos)
+        if n_pairs:
+            weighted += auroc(prob_spill[at], labels[at]) * n_pairs
+            pairs += n_pairs
+    return float(weighted / pairs) if pairs else float("nan")
+
+
 def reliability_bins(prob_spill: np.ndarray, labels: np.ndarray, n_bins: int = 10) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per non-empty equal-width bin of P(spill): mean P(spill), spill rate and sample count."""
     prob_spill, labels = _check(prob_spill, labels)
@@ -79,6 +102,7 @@ def paired_bootstrap(
     n_resamples: int = 2000,
     seed: int = 0,
     metrics: tuple[str, ...] = ("auroc", "accuracy"),
+    strata: np.ndarray | None = None,
 ) -> dict[str, dict[str, np.ndarray]]:
     """Each metric of each model on the same `n_resamples` resamples of whole groups (episodes).
 
@@ -86,6 +110,7 @@ def paired_bootstrap(
     episodes, not chunks, gives honest intervals, and scoring every model on the same resample
     makes the differences between models paired (their common noise cancels). Returns
     `{metric: {model: (n_resamples,) values}}`; a resample with one class only gives NaN AUROC.
+    The metric "auroc_within" (auroc_within) needs `strata`, one per sample (e.g. its food).
     """
     labels = np.asarray(labels).reshape(-1)
     groups = np.asarray(groups).reshape(-1)
@@ -93,6 +118,9 @@ def paired_bootstrap(
     for name, p in probs.items():
         if p.shape != labels.shape:
             raise ValueError(f"model {name!r}: {p.shape} probabilities for {labels.shape} labels")
+    if "auroc_within" in metrics and (strata is None or np.asarray(strata).reshape(-1).shape != labels.shape):
+        raise ValueError("the metric auroc_within needs one stratum per label")
+    strata = None if strata is None else np.asarray(strata).reshape(-1)
     _, group_of = np.unique(groups, return_inverse=True)
     members = [np.flatnonzero(group_of == g) for g in range(group_of.max() + 1)] if len(groups) else []
     rng = np.random.default_rng(seed)
@@ -101,5 +129,6 @@ def paired_bootstrap(
         idx = np.concatenate([members[g] for g in rng.integers(len(members), size=len(members))])
         for name, p in probs.items():
             for m in metrics:
-                out[m][name][r] = METRICS[m](p[idx], labels[idx])
+                out[m][name][r] = (auroc_within(p[idx], labels[idx], strata[idx]) if m == "auroc_within"
+                                   else METRICS[m](p[idx], labels[idx]))
     return out

@@ -18,7 +18,7 @@ import pandas as pd
 from grits_lab.errors import InputError
 from grits_lab.io import atomic_path, ensure_writable_dir, save_parquet_atomic, write_json_atomic, write_text_atomic
 from grits_lab.markdown import markdown_table
-from grits_lab.spillage.classifier_metrics import classification_report, paired_bootstrap, reliability_bins
+from grits_lab.spillage.classifier_metrics import auroc_within, classification_report, paired_bootstrap, reliability_bins
 
 LABEL_MEANING = {
     "chunk": "the spilled count rose during the chunk's own actions",
@@ -43,24 +43,47 @@ def compare_predictions(predictions: pd.DataFrame, models: list[str], n_resample
         raise InputError("no predictors to compare")
     labels = predictions["label"].to_numpy()
     probs = {m: predictions[f"p_{m}"].to_numpy() for m in models}
-    boot = paired_bootstrap(probs, labels, predictions["episode"].to_numpy(), n_resamples=n_resamples, seed=seed)
+    stratum = strata_column(predictions)
+    strata = None if stratum is None else predictions[stratum].to_numpy()
+    metrics = ("auroc", "accuracy") if strata is None else ("auroc", "accuracy", "auroc_within")
+    boot = paired_bootstrap(probs, labels, predictions["episode"].to_numpy(), n_resamples=n_resamples, seed=seed,
+                            metrics=metrics, strata=strata)
     reference = models[0]
     point = {m: classification_report(probs[m], labels, n_bins) for m in models}
+    if strata is not None:
+        for m in models:
+            point[m]["auroc_within"] = auroc_within(probs[m], labels, strata)
     rows = []
     for m in models:
         row: dict[str, Any] = {"model": m, **point[m]}
-        for metric in ("auroc", "accuracy"):
-            row[f"{metric}_lo"], row[f"{metric}_hi"] = (float(v) for v in np.nanpercentile(boot[metric][m], [2.5, 97.5]))
+        for metric in metrics:
+            row[f"{metric}_lo"], row[f"{metric}_hi"] = _interval(boot[metric][m])
             if m == reference:
                 continue
             key = f"{reference}_minus_{metric}"
             diff = boot[metric][reference] - boot[metric][m]
             diff = diff[~np.isnan(diff)]
             row[key] = point[reference][metric] - point[m][metric]
-            row[f"{key}_lo"], row[f"{key}_hi"] = (float(v) for v in np.percentile(diff, [2.5, 97.5]))
-            row[f"{key}_p"] = float(np.mean(diff <= 0))  # share of resamples where the reference is not better
+            row[f"{key}_lo"], row[f"{key}_hi"] = _interval(diff)
+            row[f"{key}_p"] = float(np.mean(diff <= 0)) if len(diff) else float("nan")  # share of resamples where the reference is not better
         rows.append(row)
     return Comparison(pd.DataFrame(rows), predictions, reference, n_resamples, n_bins, label)
+
+
+def strata_column(predictions: pd.DataFrame) -> str | None:
+    """The column the within-food AUROC stratifies by ("food" or "shape", as predict_chunks writes
+    it), or None when the chunks hold neither or only one value of it."""
+    for column in ("food", "shape"):
+        if column in predictions.columns and predictions[column].nunique() > 1:
+            return column
+    return None
+
+
+def _interval(values: np.ndarray) -> tuple[float, float]:
+    """The 2.5th and 97.5th percentiles of the finite `values`; NaN when none is."""
+    values = np.asarray(values, dtype=np.float64)
+    values = values[~np.isnan(values)]
+    return (float("nan"), float("nan")) if not len(values) else tuple(float(v) for v in np.percentile(values, [2.5, 97.5]))
 
 
 def predict_all(checkpoints: dict[str, Path], dataset_dir: str | Path, label: str = "chunk") -> pd.DataFrame:
@@ -95,7 +118,14 @@ def comparison_markdown(c: Comparison, dataset: str) -> str:
         f"differences are {ref} minus the row's model (p: share of resamples in which {ref} is not better).",
         "",
     ]
+    stratum = strata_column(c.predictions)
+    within = stratum is not None and "auroc_within" in c.table.columns
     header = ["model", "AUROC [95 %]", "accuracy [95 %]", "ECE", f"{ref} − AUROC [95 %] (p)", f"{ref} − accuracy [95 %] (p)"]
+    metrics = ["auroc", "accuracy"]
+    if within:
+        header[3:3] = [f"AUROC within {stratum} [95 %]"]
+        header.append(f"{ref} − AUROC within {stratum} [95 %] (p)")
+        metrics.append("auroc_within")
     rows = []
     for r in c.table.to_dict("records"):
         cells = [
@@ -104,11 +134,15 @@ def comparison_markdown(c: Comparison, dataset: str) -> str:
             f"{r['accuracy']:.3f} [{r['accuracy_lo']:.3f}, {r['accuracy_hi']:.3f}]",
             f"{r['ece']:.3f}",
         ]
-        for metric in ("auroc", "accuracy"):
+        if within:
+            cells[3:3] = [f"{r['auroc_within']:.3f} [{r['auroc_within_lo']:.3f}, {r['auroc_within_hi']:.3f}]"]
+        for metric in metrics:
             key = f"{ref}_minus_{metric}"
             cells.append("reference" if r["model"] == ref else f"{r[key]:+.3f} [{r[key + '_lo']:+.3f}, {r[key + '_hi']:+.3f}] ({r[key + '_p']:.3f})")
         rows.append(cells)
-    return "\n".join(lines + [markdown_table(header, rows, right=len(header))]) + "\n"
+    notes = [] if not within else ["", f"AUROC within {stratum}: over the (spill, no spill) pairs of chunks of the same {stratum} only, "
+                                       f"so knowing which {stratum}s spill more earns nothing; guidance needs this one."]
+    return "\n".join(lines + [markdown_table(header, rows, right=len(header))] + notes) + "\n"
 
 
 def plot_comparison(c: Comparison, path: Path) -> None:

@@ -182,6 +182,9 @@ def _train_in(out: Path, config: PredictorConfig, index: Any, restart: bool, pro
     return {"run_dir": str(out), "best_checkpoint": str(best_path), "last_checkpoint": str(last_path), "best_epoch": best}
 
 
+STRATA = ("food", "shape")  # the index column predict_chunks copies to each chunk, the first one present
+
+
 def scoring_label(label: str | None, trained_on: str) -> str:
     """The label to score against: `label`, else the one the predictor trained on; InputError for another name."""
     chosen = trained_on if label is None else label
@@ -195,7 +198,8 @@ def predict_chunks(predictor: TrainedPredictor, dataset_dir: str | Path, files: 
     """P(spill) of a trained predictor for every chunk of a spillage dataset, and the mean cross-entropy.
 
     One row per chunk: `episode` (the episode file, the unit a paired bootstrap resamples),
-    `chunk` (its index within the episode), `label` (of the kind `label` names: "chunk" or
+    `chunk` (its index within the episode), `food` or `shape` (the episode's, from the dataset's
+    index: a rollout set's food, a spillage set's shape; the strata of the within-food AUROC), `label` (of the kind `label` names: "chunk" or
     "horizon"; default the one the predictor trained on) and `p_spill`. The order and the point
     subsets are fixed by the predictor's seed, so two calls give the same frame.
     """
@@ -225,6 +229,10 @@ def predict_chunks(predictor: TrainedPredictor, dataset_dir: str | Path, files: 
         "label": y.astype(np.int8),
         "p_spill": p,
     })
+    for column in STRATA:  # what a chunk's episode is of: a rollout's food, a spillage trial's shape
+        if column in index.columns:
+            frame.insert(2, column, episodes.map(dict(zip(index["file"].astype(str), index[column].astype(str)))).to_numpy())
+            break
     return frame, loss
 
 

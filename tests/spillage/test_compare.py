@@ -11,7 +11,7 @@ import yaml
 
 from grits_lab.cli import main
 from grits_lab.spillage.compare import compare_predictions
-from grits_lab.spillage.classifier_metrics import auroc, classification_report, paired_bootstrap
+from grits_lab.spillage.classifier_metrics import auroc, auroc_within, classification_report, paired_bootstrap
 
 
 def _predictions(n_episodes=40, chunks=6, seed=0):
@@ -54,6 +54,42 @@ def test_table_holds_the_point_metrics_and_a_significant_paired_difference():
     assert rows.loc["noise", "auroc_lo"] < rows.loc["noise", "auroc"] < rows.loc["noise", "auroc_hi"]
 
 
+def _two_foods():
+    # food a spills in 3 of 4 chunks, food b in 1 of 4
+    food = np.array(["a"] * 4 + ["b"] * 4)
+    label = np.array([1, 1, 1, 0, 1, 0, 0, 0])
+    return food, label
+
+
+def test_within_food_auroc_gives_nothing_for_knowing_which_food_spills_more():
+    food, label = _two_foods()
+    identity = np.where(food == "a", 0.75, 0.25)  # each food's spill rate, the same for all its chunks
+    assert auroc(identity, label) == pytest.approx(0.75) and auroc_within(identity, label, food) == 0.5
+    # ranks every chunk of a food right, with the foods' levels the wrong way round: pooled AUROC
+    # suffers (chunks of b outrank a's spills), within food it is perfect
+    ranked = np.array([0.1, 0.1, 0.1, 0.0, 0.9, 0.8, 0.8, 0.8])
+    assert auroc(ranked, label) < 0.7 and auroc_within(ranked, label, food) == 1.0
+    # the pairs of each food weigh by their count: a holds 3 pairs, b 3; a ranked right, b backwards
+    mixed = np.array([0.9, 0.9, 0.9, 0.1, 0.1, 0.9, 0.9, 0.9])
+    assert auroc_within(mixed, label, food) == pytest.approx(0.5)
+    assert np.isnan(auroc_within(identity, np.zeros(8), food))  # no food holds both classes
+
+
+def test_the_comparison_scores_within_food_when_the_chunks_name_their_food():
+    frame = _predictions()
+    frame["food"] = np.where(frame["episode"].str[-1].astype(int) % 2 == 0, "a", "b")
+    frame["p_food"] = np.where(frame["food"] == "a", 0.6, 0.4) + 0.0 * frame["label"]  # knows only the food
+    c = compare_predictions(frame, ["good", "food"], n_resamples=300)
+    rows = c.table.set_index("model")
+    assert rows.loc["good", "auroc_within"] == 1.0 and rows.loc["food", "auroc_within"] == 0.5
+    assert rows.loc["food", "good_minus_auroc_within"] == pytest.approx(0.5) and rows.loc["food", "good_minus_auroc_within_lo"] > 0.3
+    from grits_lab.spillage.compare import comparison_markdown
+    text = comparison_markdown(c, "d")
+    assert "AUROC within food [95 %]" in text and "| 1.000 [1.000, 1.000] |" in text
+    # without a food column, the table holds no within-food AUROC
+    assert "auroc_within" not in compare_predictions(_predictions(), ["good", "noise"], n_resamples=50).table.columns
+
+
 def test_cli_compares_trained_predictors_and_refuses_an_untrained_one(tmp_path, tiny_dataset, capsys):
     paths = []
     for name, inputs in (("full", "trajectory_and_cloud"), ("traj", "trajectory")):
@@ -76,7 +112,7 @@ def test_cli_compares_trained_predictors_and_refuses_an_untrained_one(tmp_path, 
     summary = json.loads((out / "predictor_comparison.json").read_text())
     assert [m["model"] for m in summary["models"]] == ["full", "traj"] and summary["reference"] == "full"
     predictions = pd.read_parquet(out / "predictions.parquet")
-    assert list(predictions.columns) == ["episode", "chunk", "label", "p_full", "p_traj"]
+    assert list(predictions.columns) == ["episode", "chunk", "shape", "label", "p_full", "p_traj"]
     assert len(predictions) == 12 * 3 and predictions.groupby("episode")["chunk"].max().eq(2).all()
     assert (out / "predictor_comparison.png").stat().st_size > 10_000
     assert "full − AUROC" in (out / "predictor_comparison.md").read_text()
