@@ -142,7 +142,7 @@ def write_rollout_chunks(out: Path, record: dict[str, Any], episode: dict[str, A
         dataset.mkdir(parents=True, exist_ok=True)
         write_text_atomic(dataset / MANIFEST_FILE, yaml.safe_dump({
             "kind": "spillage", "format_version": 1, "status": "complete", "source": "policy rollouts",
-            "run_id": record.get("run_id"), "method": record["method"],
+            "protocol": PROTOCOL, "run_id": record.get("run_id"), "method": record["method"],
             "config": {"n_action_steps": int(episode["meta"]["n_action_steps"])},
         }, sort_keys=False))
     episode_id = f"{record['method']}-{record['food']}-{record['level']}-{int(record['trial'])}"

@@ -177,6 +177,9 @@ def test_rollout_chunks_are_a_dataset_the_predictor_scores(models, tmp_path):
     dataset = tmp_path / "rollout_chunks" / "dp"
     index = load_index(dataset)
     assert len(index) == 1 and index["n_action_steps"].iloc[0] == 12
+    from grits_lab.data.info import dataset_summary
+    from grits_lab.versions import PROTOCOL
+    assert dataset_summary(dataset)["protocol"] == PROTOCOL  # the labels are the physics of the protocol it ran under
     arrays, meta = read_episode(dataset / index["file"].iloc[0])
     c = len(arrays["chunk_start"])
     assert c >= 1 and arrays["chunk_cloud"].shape[:3] == (c, 3, N_POINTS)
