@@ -158,6 +158,22 @@ def _cluster_steps():
     return commands, env
 
 
+def _wait_for_cpus(address, env, cpus, timeout_s=120):
+    """Block until the cluster at `address` shows `cpus` CPUs: `ray start` on a worker node returns before
+    the head counts its CPUs on a busy machine, and a job started then sizes its pool to the head alone."""
+    code = (
+        "import sys, time, ray\n"
+        f"ray.init(address={address!r}, logging_level='ERROR')\n"
+        f"deadline = time.monotonic() + {timeout_s}\n"
+        f"while ray.cluster_resources().get('CPU', 0) < {cpus} and time.monotonic() < deadline:\n"
+        "    time.sleep(0.5)\n"
+        "print(ray.cluster_resources().get('CPU', 0))\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=timeout_s + 60)
+    shown = proc.stdout.strip().splitlines()[-1:] or ["none"]
+    assert proc.returncode == 0 and float(shown[0]) >= cpus, f"the cluster shows {shown[0]} CPUs, not {cpus}\n{proc.stderr[-2000:]}"
+
+
 @pytest.fixture
 def two_nodes(tmp_path):
     """A head and a worker node on this machine, started with the step-1 commands of docs/cluster.md as written
@@ -181,6 +197,7 @@ def two_nodes(tmp_path):
             groups.append(proc.pid)
             assert proc.returncode == 0, f"docs/cluster.md step 1 failed: {line}\n{out.decode()[-2000:]}"
         client_env = dict(env, **{k: v.replace("HEAD_IP", "127.0.0.1").replace("6379", str(port)) for k, v in env_vars.items()})
+        _wait_for_cpus(f"127.0.0.1:{port}", client_env, 3)
         yield f"127.0.0.1:{port}", client_env, groups[-1]
     finally:
         for group in reversed(groups):
