@@ -36,6 +36,11 @@ class EpisodeKey:
 class EpisodeGrid:
     """Foods x quantity levels x trials; episode seed = derive_seed(seed, food, level, trial).
 
+    The trials played are first_trial .. first_trial + trials - 1 (0-based). A trial's seed depends on
+    its index only, so trials 5-9 of a 10-trial protocol (`first_trial: 5, trials: 5`) are the same
+    episodes as in the whole run: a protocol split across machines or sittings is reported as one by
+    `grits-lab report RUN OTHER_RUN`.
+
     Foods may define different levels (orange has one): a listed level a food lacks is skipped
     for that food, and a level is a typo only when no listed food has it (`keys`).
     """
@@ -43,6 +48,7 @@ class EpisodeGrid:
     foods: list[str] = field(default_factory=lambda: list(UNSEEN_FOODS))
     levels: list[str] = field(default_factory=list)  # empty: every level each food defines
     trials: int = 5
+    first_trial: int = 0  # index of the first trial played
     seed: int = 0  # root seed
 
     def __post_init__(self) -> None:
@@ -50,6 +56,7 @@ class EpisodeGrid:
         require(len(set(self.foods)) == len(self.foods), "foods", self.foods, "without repeats")
         require(len(set(self.levels)) == len(self.levels), "levels", self.levels, "without repeats")
         require(self.trials >= 1, "trials", self.trials, "at least 1")
+        require(self.first_trial >= 0, "first_trial", self.first_trial, "non-negative")
         require(self.seed >= 0, "seed", self.seed, "non-negative")
 
     def keys(self, library: "FoodLibrary", key_prefix: str = "") -> list[EpisodeKey]:
@@ -66,6 +73,6 @@ class EpisodeGrid:
                 raise ConfigError(f"`{key_prefix}levels` {self.levels} names no level of food {food!r} "
                                   f"(its levels: {', '.join(spec.levels)})")
             for level in present:
-                for trial in range(self.trials):
+                for trial in range(self.first_trial, self.first_trial + self.trials):
                     keys.append(EpisodeKey(food, level, trial, derive_seed(self.seed, food, level, trial), spec.split))
         return keys

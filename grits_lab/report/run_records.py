@@ -4,7 +4,8 @@ What the report expects in RUN_DIR (written by `grits-lab evaluate` and `grits-l
 
 * episode records, one row per episode with the columns of grits_lab/records.py, as Parquet:
   `episodes.parquet`, or several `*.parquet` shards, directly in RUN_DIR or in RUN_DIR/records/
-  or RUN_DIR/episodes/ (RUN_DIR may also be a single .parquet file). Rows that appear in more
+  or RUN_DIR/episodes/ (RUN_DIR may also be a single .parquet file), or as `episodes.csv` directly in
+  RUN_DIR: a committed summary page (`--summary-to docs/experiments/NAME`) is a run. Rows that appear in more
   than one file (a consolidated file beside its shards) are counted once. Records of further run
   directories can join them (`load_run(..., also=...)`, `grits-lab report RUN_DIR OTHER_RUN ...`).
 * optional run metadata: `config.yaml` (and any other *.yaml at the top level) and
@@ -38,6 +39,7 @@ FLAG_COLUMNS = (*OUTCOME_COLUMNS, "spilled_before_scoop")
 RECORD_SUBDIRS = ("records", "episodes")
 TRIALS_FILES = ("trials.parquet", "trials.csv")
 NOT_RECORD_FILES = {"trials.parquet", "index.parquet"}
+PAGE_RECORDS_FILE = "episodes.csv"  # the records a summary page keeps (grits_lab/report/summary.py)
 MAX_CONFIG_CHARS = 20_000
 # Columns that identify one episode; a row seen twice with the same identity is a duplicate.
 IDENTITY_COLUMNS = ("run_id", "protocol", "method", "food", "level", "trial", "seed", "rho", "s", "checkpoint_predictor")
@@ -88,7 +90,7 @@ def load_run(run_dir: str | Path, exclude: str | Path | None = None, also: Seque
             raise InputError(f"{other} is a sweep; give evaluation run directories after RUN_DIR")
         found = _read_records(_record_files(other, excluded), data)
         if not found:
-            raise InputError(f"no episode records in {other}: expected episodes.parquet or *.parquet files with "
+            raise InputError(f"no episode records in {other}: expected episodes.parquet, *.parquet files or a summary page's episodes.csv with "
                              f"columns {', '.join(REQUIRED_COLUMNS)}")
         data.also_runs.append(other)
         sources.append((other, found))
@@ -104,7 +106,7 @@ def load_run(run_dir: str | Path, exclude: str | Path | None = None, also: Seque
     if not frames and data.trials is None:
         detail = f"; ignored: {'; '.join(data.ignored_files)}" if data.ignored_files else ""
         raise InputError(
-            f"no episode records in {run_dir}: expected episodes.parquet or *.parquet files with "
+            f"no episode records in {run_dir}: expected episodes.parquet, *.parquet files or a summary page's episodes.csv with "
             f"columns {', '.join(REQUIRED_COLUMNS)} (or a sweep trials.parquet/trials.csv){detail}"
         )
     if frames:
@@ -288,7 +290,7 @@ def _deduplicate(frame: pd.DataFrame) -> tuple[pd.DataFrame, int]:
 def _record_files(run_dir: Path, excluded: Path | None) -> list[Path]:
     if run_dir.is_file():
         if run_dir.suffix != ".parquet":
-            raise InputError(f"expected a run directory or a .parquet file of episode records, got {run_dir}")
+            raise InputError(f"expected a run directory, a summary page or a .parquet file of episode records, got {run_dir}")
         return [run_dir]
     folders = [run_dir] + [run_dir / sub for sub in RECORD_SUBDIRS if (run_dir / sub).is_dir()]
     files = []
@@ -299,6 +301,8 @@ def _record_files(run_dir: Path, excluded: Path | None) -> list[Path]:
             p for p in folder.glob("*.parquet")
             if p.is_file() and not p.name.startswith(".") and p.name not in NOT_RECORD_FILES
         )
+    if (run_dir / PAGE_RECORDS_FILE).is_file():
+        files.append(run_dir / PAGE_RECORDS_FILE)
     # A consolidated episodes.parquet is read first, so its rows win over identical shard rows.
     return sorted(files, key=lambda p: (p.name != "episodes.parquet", str(p)))
 

@@ -8,6 +8,9 @@
     paired.csv        every method against Diffusion Policy on the episodes both ran (run_compare.compare_methods)
     provenance.json   protocol, commits, machine, dates, wall time, checkpoint digests, episodes per method
     config.yaml       the run's config as it ran (RUN_DIR/config.yaml)
+    episodes.csv      the episode records themselves, one row per episode (grits_lab/records.py), so that a
+                      page is a run the report reads: `grits-lab report NEW_RUN docs/experiments/NAME` adds
+                      the trials of another sitting or machine (`first_trial`) to the same table
 
 The files count what the records hold and nothing else: a method with fewer episodes than its
 config plans has its own n. docs/results.md, the README's table and every experiment page are
@@ -41,6 +44,9 @@ STAGES_FILE = "stage_cause.csv"
 CLAIMS_FILE = "claims.csv"
 PROVENANCE_FILE = "provenance.json"
 CONFIG_FILE = "config.yaml"
+EPISODES_FILE = "episodes.csv"
+# Columns the report adds when it reads records (run_records.normalize_records); a page keeps the records' own.
+DERIVED_COLUMNS = ("is_error", "food_key", "variant", "variant_name")
 
 # outcome -> what k counts, and over which episodes (n).
 OUTCOMES: dict[str, str] = {
@@ -162,6 +168,8 @@ def write_summary(run: RunData, out_dir: str | Path, command: str) -> list[Path]
     for name in (CLAIMS_FILE, PAIRED_METHODS_FILE):
         if name not in dict(tables):
             (out / name).unlink(missing_ok=True)
+    write_text_atomic(out / EPISODES_FILE, episodes_csv(run.episodes))
+    files.append(out / EPISODES_FILE)
     write_json_atomic(out / PROVENANCE_FILE, summary_provenance(run, command))
     files.append(out / PROVENANCE_FILE)
     config = (run.run_dir if run.run_dir.is_dir() else run.run_dir.parent) / CONFIG_FILE
@@ -169,6 +177,15 @@ def write_summary(run: RunData, out_dir: str | Path, command: str) -> list[Path]
         shutil.copyfile(config, out / CONFIG_FILE)
         files.append(out / CONFIG_FILE)
     return files
+
+
+def episodes_csv(episodes: pd.DataFrame) -> str:
+    """The records as a page keeps them: every record column, rows in (method, food, level, trial) order,
+    floats at full precision, so that reading the file back reproduces every table of the page."""
+    frame = episodes.drop(columns=[c for c in DERIVED_COLUMNS if c in episodes.columns])
+    order = [c for c in ("method", "food", "level", "trial", "rho", "s") if c in frame.columns]
+    frame = frame.sort_values(order, kind="stable") if order else frame
+    return frame.to_csv(index=False, lineterminator="\n")
 
 
 def _round(value: float) -> float:

@@ -244,7 +244,8 @@ class StudyConfig:
             # The identity's recipe is fixed, not a reader of old names: the validation block is hashed
             # with its root seed as `root_seed`, as every stored study's identity (this protocol's
             # included) was taken; renaming it here would refuse them all.
-            "validation": {"foods": v.foods, "levels": v.levels, "trials": v.trials, "root_seed": v.seed},
+            "validation": {"foods": v.foods, "levels": v.levels, "trials": v.trials, "root_seed": v.seed,
+                           **({"first_trial": v.first_trial} if v.first_trial else {})},
             "evaluator": self.evaluator, "evaluation": self._evaluation_identity(),
         })
 

@@ -125,3 +125,39 @@ def test_a_shift_block_sets_each_methods_counts_before_beside_after(tmp_path):
     (docs / "after" / "README.md").write_text("<!-- generated: shift before -->\n<!-- end generated -->\n")
     with pytest.raises(InputError, match="BEFORE..AFTER"):
         render_all(tmp_path)
+
+
+def test_a_page_is_a_run_the_report_reads_so_a_protocol_split_across_sittings_is_reported_as_one(tmp_path):
+    """Trials 0-2 summarized to a page, trials 3-4 run later: the page and the new run reported together
+    give every table the whole run gives, and the page keeps the records it counted."""
+    from tests.report.synthetic_records import plausible_run
+
+    records = plausible_run(seed=3)
+    records = records[records["method"].isin(["dp", "grits", "dp_post"])].copy()
+    records["checkpoint_policy"] = "9d42be08670d9975"
+    attribution = list(attribution_columns())
+    records[attribution] = 0
+    records.loc[records["spillage"], attribution[0]] = 4
+    records.loc[records.index[5], "error"] = "IK failed to converge"  # an errored episode survives the round trip
+    records.loc[records.index[5], "task_success"] = False
+    runs = {}
+    for name, rows in (("whole", records), ("first", records[records["trial"] <= 2]), ("later", records[records["trial"] > 2])):
+        runs[name] = tmp_path / name
+        runs[name].mkdir()
+        rows.to_parquet(runs[name] / "episodes.parquet")
+    docs = tmp_path / "docs" / "experiments"
+    assert main(["report", str(runs["whole"]), "--output-dir", str(tmp_path / "r0"), "--summary-to", str(docs / "whole")]) == 0
+    assert main(["report", str(runs["first"]), "--output-dir", str(tmp_path / "r1"), "--summary-to", str(docs / "first")]) == 0
+    page = pd.read_csv(docs / "first" / "episodes.csv")
+    assert len(page) == int((records["trial"] <= 2).sum()) and set(page["trial"]) == {0, 1, 2}
+    assert main(["report", str(runs["later"]), str(docs / "first"), "--output-dir", str(tmp_path / "r2"),
+                 "--summary-to", str(docs / "joined")]) == 0
+    for table in ("summary.csv", "stage_cause.csv", "paired.csv", "claims.csv"):
+        assert (docs / "joined" / table).read_text() == (docs / "whole" / table).read_text(), table
+    joined = json.loads((docs / "joined" / "provenance.json").read_text())
+    assert joined["methods"]["dp"]["trials"] == [0, 1, 2, 3, 4] and joined["episodes"] == len(records)
+    # The same episodes twice (the page beside the run it was made from) are refused, naming both.
+    from grits_lab.report.run_records import load_run
+
+    with pytest.raises(InputError, match="hold the same episode"):
+        load_run(runs["first"], also=[docs / "first"])
