@@ -213,6 +213,16 @@ def _refuse_other_checkpoints(records_path: Path, done: list[dict[str, Any]], pa
                     f"{path} has digest {digests[path]}; rerun with --restart to discard the records, or choose another output_dir")
 
 
+def _refuse_other_action_offset(records_path: Path, done: list[dict[str, Any]], offset: float) -> None:
+    """Records whose scoop ran with another `scoop.action_offset` are not resumed under this one (a run
+    directory holds one; records from before the column ran without any): InputError naming both."""
+    recorded = {float(r.get("scoop_action_offset_m") if _present(r.get("scoop_action_offset_m")) else 0.0) for r in done}
+    other = sorted(recorded - {float(offset)})
+    if other:
+        raise InputError(f"{records_path} holds episodes run with `scoop.action_offset` {other[0]:g} m, but the config sets "
+                         f"{float(offset):g} m; choose another output_dir (or rerun with --restart to discard them)")
+
+
 def _present(value: Any) -> bool:
     return value is not None and not (isinstance(value, float) and math.isnan(value))
 
@@ -275,6 +285,7 @@ def _evaluate_in(out: Path, config: EvaluationConfig, specs: list[EpisodeSpec], 
     done = [] if restart else _load_existing(records_path)
     _refuse_other_protocol(records_path, done)
     _refuse_other_checkpoints(records_path, done, paths, digests)
+    _refuse_other_action_offset(records_path, done, config.scoop.action_offset)
     recorded_methods = list(dict.fromkeys(str(r["method"]) for r in done))
     from grits_lab.evaluation.custom_methods import registered_methods
 

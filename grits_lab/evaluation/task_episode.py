@@ -44,6 +44,9 @@ def run_scoop(env: ScoopEnv, controller: Controller, scene: EpisodeScene, histor
     With `record_chunks`, also "chunks": every executed chunk's composite cloud at its start
     (3, N, 3), its first action's index in the scoop and the spilled count before it, plus the
     scoop's executed actions (T, 9) (see `rollout_chunk_episode`).
+
+    `settings.action_offset` > 0 moves every action the simulator executes (not the history the
+    controller reads, which keeps what it asked for) by `settings.offset_vector(scene.seed)`.
     """
     cloud_steps = int(getattr(controller, "cloud_steps", 0))
     image_steps = int(getattr(controller, "image_steps", 0))
@@ -59,6 +62,7 @@ def run_scoop(env: ScoopEnv, controller: Controller, scene: EpisodeScene, histor
         if image_steps and index not in history.rgbd:
             history.rgbd[index] = scene.rgbd(tuple(encoder.image_size), encoder.cameras)
 
+    offset = settings.offset_vector(scene.seed)
     controller.reset(scene)
     steps, plans, completion_step = 0, 0, -1
     plan_times: list[float] = []
@@ -91,9 +95,9 @@ def run_scoop(env: ScoopEnv, controller: Controller, scene: EpisodeScene, histor
             chunk_log.append((steps, chunk_cloud, spilled_before))
         ended = False
         for i, action in enumerate(actions):
-            obs, _, terminated, truncated, _ = env.step(action)
+            obs, _, terminated, truncated, _ = env.step(action + offset)
             last_action = action
-            executed.append(np.asarray(action, dtype=np.float32))
+            executed.append(np.asarray(action + offset, dtype=np.float32))  # what the spoon was sent to
             steps += 1
             scene.advance()
             history.append(obs, action)
@@ -109,7 +113,7 @@ def run_scoop(env: ScoopEnv, controller: Controller, scene: EpisodeScene, histor
         if ended:
             break
     for _ in range(settings.settle_steps):
-        env.step(last_action)
+        env.step(last_action + offset)
         scene.advance()
     metrics = env.metrics()
     end_step = steps - 1 if completion_step < 0 else completion_step
@@ -344,6 +348,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         "plan_time_mean_s": scoop["plan_time_mean_s"],
         "plan_time_max_s": scoop["plan_time_max_s"],
         "scoop_time_s": scoop_time,
+        "scoop_action_offset_m": float(config.scoop.action_offset),
         **summarize_guidance(scoop["diagnostics"]),
     }
     transferred, spilled_total, transfer_time, final = 0, int(m["spilled"]), 0.0, m

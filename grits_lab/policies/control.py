@@ -53,6 +53,11 @@ class ScoopSettings:
     min_steps: int = 24  # never stop before this many actions (the spoon starts still)
     n_action_steps: int | None = None  # null: the policy's own (12 at the paper's settings)
     settle_steps: int = 5  # actions holding the last pose before the scoop is judged
+    # A diagnostic, 0 in every protocol config: every executed scoop action (and the settling hold)
+    # is moved rigidly by this many metres, along a direction drawn from the episode's seed, so a
+    # run on the same seeds tells how often an outcome changes when the spoon goes where the policy
+    # asked, give or take a distance no observation resolves (docs/evaluation.md, "Outcome sensitivity").
+    action_offset: float = 0.0
 
     def __post_init__(self) -> None:
         require(self.max_steps >= 1, "scoop.max_steps", self.max_steps, "at least 1")
@@ -60,6 +65,18 @@ class ScoopSettings:
         require(self.min_steps >= 0, "scoop.min_steps", self.min_steps, "non-negative")
         require(self.n_action_steps is None or self.n_action_steps >= 1, "scoop.n_action_steps", self.n_action_steps, "at least 1 or null")
         require(self.settle_steps >= 0, "scoop.settle_steps", self.settle_steps, "non-negative")
+        require(0.0 <= self.action_offset <= 0.01, "scoop.action_offset", self.action_offset,
+                "in [0, 0.01] metres (a diagnostic nudge, not a motion: 0.0005 is half a millimetre)")
+
+    def offset_vector(self, seed: int) -> np.ndarray:
+        """(9,) what is added to every executed scoop action: `action_offset` metres in position along
+        a unit direction drawn uniformly on the sphere from `seed` (the episode's), no rotation.
+        Zeros when `action_offset` is 0."""
+        offset = np.zeros(9)
+        if self.action_offset > 0.0:
+            direction = np.random.default_rng(derive_seed(int(seed), "action-offset")).normal(size=3)
+            offset[:3] = self.action_offset * direction / np.linalg.norm(direction)
+        return offset
 
 
 @dataclass
