@@ -28,6 +28,7 @@ from grits_lab.report.tables import ReportTable
 from grits_lab.report.vocabulary import method_display
 
 PAIR_KEYS = ("method", "food", "level", "trial")
+OFFSET_COLUMN = "scoop_action_offset_m"  # `scoop.action_offset` of the run (docs/evaluation.md, "Outcome sensitivity")
 COMPARISON_FILE = "comparison.csv"
 PAIRED_METHODS_FILE = "paired.csv"
 PAIR_REFERENCE = "dp"  # the unguided policy every guided variant is compared with
@@ -112,6 +113,8 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
     outcome of `PAIRED_OUTCOMES` the columns `<outcome>_before`, `_after` (episodes with it),
     `_only_before`, `_only_after` and `_p` (`sign_test_p`). Episodes with an error in either run
     are left out (`errors` counts them)."""
+    # records from before the offset column ran without one; both sides hold it, so the merge suffixes it
+    before, after = (f if OFFSET_COLUMN in f.columns else f.assign(**{OFFSET_COLUMN: 0.0}) for f in (before, after))
     both = paired_episodes(before, after)
     rows = []
     for method in dict.fromkeys(both["method"]):
@@ -123,6 +126,8 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
             if f"{column}_before" in pairs.columns:
                 same &= _equal(pairs[f"{column}_before"], pairs[f"{column}_after"])
         row = {"method": method, "paired": int(len(pairs)), "errors": int(errors.sum()), "scoop_equal": int(same.sum())}
+        for side in ("before", "after"):
+            row[f"action_offset_{side}_m"] = float(pairs[f"{OFFSET_COLUMN}_{side}"].fillna(0.0).max()) if len(pairs) else 0.0
         for outcome in PAIRED_OUTCOMES:
             a, b = pairs[f"{outcome}_before"].astype(bool), pairs[f"{outcome}_after"].astype(bool)
             row.update({f"{outcome}_before": int(a.sum()), f"{outcome}_after": int(b.sum()),
@@ -205,6 +210,11 @@ def comparison_markdown(table: pd.DataFrame) -> str:
     lines.append(f"Episodes with each outcome, {before} → {after}, on the same seeds; (−a +b): episodes that had it only "
                  "in the first run, only in the second; p: exact two-sided sign test on those. Scoop equal: scooped, "
                  "spilled, scoop success and scoop length all equal. Episodes with an error in either run are left out.")
+    offsets = {side: float(table[f"action_offset_{side}_m"].max()) for side in ("before", "after")
+               if f"action_offset_{side}_m" in table.columns}
+    if any(offsets.values()):
+        lines[-1] += (f" Scoop actions offset (`scoop.action_offset`): {offsets.get('before', 0.0) * 1000:g} mm in {before}, "
+                      f"{offsets.get('after', 0.0) * 1000:g} mm in {after}: the changes are what that offset did.")
     return "\n".join(lines)
 
 

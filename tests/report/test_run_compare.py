@@ -166,3 +166,17 @@ def test_spills_before_the_pour_count_the_scoop_lift_and_carry_and_not_the_pour(
     # A paired table written before the outcome existed still renders, without its column.
     old = table.drop(columns=[c for c in table.columns if c.startswith("spill_before_pour")])
     assert "spill before the pour" not in paired_methods_markdown(old)[0]
+
+
+def test_a_run_with_offset_scoop_actions_is_named_in_the_caption(tmp_path, capsys):
+    _run([("success", 40, 0), ("spill", 40, 0)], tmp_path, "base")  # records from before the column: no offset
+    moved = _run([("spill", 40, 0), ("spill", 40, 0)], tmp_path, "moved").assign(scoop_action_offset_m=0.0005)
+    moved.to_parquet(tmp_path / "moved" / "episodes.parquet")
+    assert main(["compare-runs", str(tmp_path / "base"), str(tmp_path / "moved"), "--output-dir", str(tmp_path / "cmp")]) == 0
+    out = capsys.readouterr().out
+    assert "| Diffusion Policy | 2 | 1/2 |" in out
+    assert "offset (`scoop.action_offset`): 0 mm in base, 0.5 mm in moved" in out
+    table = pd.read_csv(tmp_path / "cmp" / "comparison.csv").set_index("method")
+    assert (table.loc["dp", "action_offset_before_m"], table.loc["dp", "action_offset_after_m"]) == (0.0, 0.0005)
+    assert main(["compare-runs", str(tmp_path / "base"), str(tmp_path / "base")]) == 0
+    assert "action_offset" not in capsys.readouterr().out
