@@ -29,7 +29,7 @@ def _loader(path: Path):
         return load_collect_config
     if name.startswith("evaluate") or "methods" in data:
         return load_evaluation_config
-    if name.startswith(("transfer_", "sim_", "scoop_")):  # an override of the transfer, the world or the scoop, merged onto the protocol
+    if name.startswith(("transfer_", "sim_", "scoop_", "guide_")):  # an override of the transfer, the world, the scoop or the guide, merged onto the protocol
         return lambda p: load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(p)))
     if name.startswith("policy"):
         return load_train_config
