@@ -21,6 +21,7 @@ import pandas as pd
 from grits_lab.errors import InputError
 from grits_lab.io import write_text_atomic
 from grits_lab.markdown import markdown_table
+from grits_lab.report.outcome_ceiling import CEILING_OUTCOMES, repeatability
 from grits_lab.report.run_records import load_run
 from grits_lab.report.spill_tables import (delivered_share, has_attribution, lifted_episodes, spilled_after_scoop,
                                            spilled_before_pour)
@@ -133,6 +134,10 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
             row.update({f"{outcome}_before": int(a.sum()), f"{outcome}_after": int(b.sum()),
                         f"{outcome}_only_before": int((a & ~b).sum()), f"{outcome}_only_after": int((b & ~a).sum())})
             row[f"{outcome}_p"] = sign_test_p(row[f"{outcome}_only_before"], row[f"{outcome}_only_after"])
+        if row["action_offset_before_m"] != row["action_offset_after_m"] and len(pairs):
+            # one run nudges the scoop where the other does not: each outcome's changes are its chance part
+            for _, c in repeatability(pairs).iterrows():
+                row.update({f"{c['outcome']}_{k}": c[k] for k in ("auroc_ceiling", "auroc_ceiling_low", "auroc_ceiling_high")})
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -215,7 +220,23 @@ def comparison_markdown(table: pd.DataFrame) -> str:
     if any(offsets.values()):
         lines[-1] += (f" Scoop actions offset (`scoop.action_offset`): {offsets.get('before', 0.0) * 1000:g} mm in {before}, "
                       f"{offsets.get('after', 0.0) * 1000:g} mm in {after}: the changes are what that offset did.")
+    ceilings = [o for o in CEILING_OUTCOMES if f"{o}_auroc_ceiling" in table.columns]
+    if ceilings:
+        rows = [[method_display(row["method"]), PAIRED_OUTCOMES[o],
+                 f"{(row[f'{o}_before'] + row[f'{o}_after']) / (2 * row['paired']):.0%}",
+                 f"{row[f'{o}_only_before'] + row[f'{o}_only_after']}/{row['paired']}", _ceiling_cell(row, o)]
+                for _, row in table.iterrows() for o in ceilings if f"{o}_auroc_ceiling" in row and not pd.isna(row[f"{o}_auroc_ceiling"])]
+        lines += ["", markdown_table(["Method", "Outcome", "Rate, both runs", "Changed by the offset", "AUROC ceiling [95 %]"], rows), "",
+                  "The offset is taken as chance the observations cannot show: each episode a coin, its two runs two tosses. "
+                  "AUROC ceiling: the best any predictor of what both runs share can rank the outcome, over every coin mix "
+                  "with the measured rate and changes (grits_lab/report/outcome_ceiling.py); interval from resampling "
+                  "episodes (200 resamples)."]
     return "\n".join(lines)
+
+
+def _ceiling_cell(row: pd.Series, outcome: str) -> str:
+    return (f"{row[f'{outcome}_auroc_ceiling']:.2f} [{row[f'{outcome}_auroc_ceiling_low']:.2f}, "
+            f"{row[f'{outcome}_auroc_ceiling_high']:.2f}]")
 
 
 def write_comparison(table: pd.DataFrame, markdown: str, output_dir: str | Path) -> list[Path]:

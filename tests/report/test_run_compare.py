@@ -176,7 +176,8 @@ def test_a_run_with_offset_scoop_actions_is_named_in_the_caption(tmp_path, capsy
     out = capsys.readouterr().out
     assert "| Diffusion Policy | 2 | 1/2 |" in out
     assert "offset (`scoop.action_offset`): 0 mm in base, 0.5 mm in moved" in out
+    assert "| Diffusion Policy | spill during the scoop | 75% | 1/2 |" in out  # 1 + 2 of 4 runs; trial 0 changed
     table = pd.read_csv(tmp_path / "cmp" / "comparison.csv").set_index("method")
     assert (table.loc["dp", "action_offset_before_m"], table.loc["dp", "action_offset_after_m"]) == (0.0, 0.0005)
     assert main(["compare-runs", str(tmp_path / "base"), str(tmp_path / "base")]) == 0
-    assert "action_offset" not in capsys.readouterr().out
+    assert "action_offset" not in (out := capsys.readouterr().out) and "AUROC ceiling" not in out

@@ -1,0 +1,90 @@
+"""How well any predictor could rank an outcome that a sub-millimetre nudge changes: the AUROC ceiling.
+
+Two runs on the same seeds, the second with every scoop action offset by a distance no observation
+resolves (`scoop.action_offset`, docs/evaluation.md "Outcome sensitivity"), give each episode two
+draws of a binary outcome y from the same observations. Take an episode's outcome as a coin with
+its own chance p of coming up 1, the pair as two tosses of that coin. Then
+
+    rate  m = E[p]            = the outcome's rate over both runs,
+    noise v = E[p (1 - p)]    = half the fraction of episodes whose two outcomes differ,
+
+and the best score any predictor of those observations can give an episode is p itself. Its AUROC
+against the outcome is
+
+    AUROC(p) = E[p_a (1 - p_b) (1[p_a > p_b] + 1/2 1[p_a = p_b])] / (m (1 - m)),
+
+a and b two episodes drawn independently. `max_auroc` is the largest value this takes over every
+distribution of p on [0, 1] with the measured m and v: no predictor that sees what both runs of an
+episode share can rank the outcome better on such episodes. v = 0 (the nudge changes nothing)
+allows 1; v = m (1 - m) (every episode a coin of chance m) forces 0.5.
+
+The maximum is a quadratic programme over the weights of a grid of values of p (non-convex: solved
+from several random starts with SLSQP). `repeatability` estimates m and v from the paired episodes
+and the ceiling with a 95 % interval from resampling episodes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+CEILING_OUTCOMES = ("spillage", "spill_before_pour", "task_success")  # of run_compare.PAIRED_OUTCOMES
+
+
+def max_auroc(rate: float, noise: float, *, grid: int = 21, starts: int = 4, seed: int = 0) -> float:
+    """The largest AUROC of any score against a binary outcome of mean `rate` (m, in (0, 1)) whose
+    chance part is `noise` (v = E[p (1 - p)], >= 0), over distributions of p on a grid of `grid`
+    values in [0, 1] with m added; v above m (1 - m), which no distribution reaches, is taken as
+    m (1 - m). NaN for a rate of 0 or 1 (nothing to rank). Deterministic for a given `seed`."""
+    from scipy.optimize import minimize
+
+    if not 0.0 < rate < 1.0:
+        return float("nan")
+    noise = min(max(float(noise), 0.0), rate * (1.0 - rate))
+    p = np.unique(np.append(np.linspace(0.0, 1.0, grid), rate))
+    wins = np.outer(p, 1.0 - p) * ((p[:, None] > p[None, :]) + 0.5 * np.eye(len(p)))
+    sym = wins + wins.T
+    constraints = [{"type": "eq", "fun": lambda w: w.sum() - 1.0},
+                   {"type": "eq", "fun": lambda w: w @ p - rate},
+                   {"type": "eq", "fun": lambda w: w @ (p * (1.0 - p)) - noise}]
+    rng = np.random.default_rng(seed)
+    best = 0.5 if np.isclose(noise, rate * (1.0 - rate)) else 0.0
+    for _ in range(starts):
+        result = minimize(lambda w: -(w @ wins @ w), rng.dirichlet(np.ones(len(p))), jac=lambda w: -(sym @ w),
+                          bounds=[(0.0, 1.0)] * len(p), constraints=constraints, method="SLSQP", options={"maxiter": 500})
+        if result.success:
+            best = max(best, float(-result.fun) / (rate * (1.0 - rate)))
+    return min(best, 1.0)
+
+
+def rate_and_noise(before: np.ndarray, after: np.ndarray) -> tuple[float, float]:
+    """(m, v) of paired binary outcomes (N,) each: the mean over both runs and half the discordant fraction."""
+    before, after = np.asarray(before, dtype=bool), np.asarray(after, dtype=bool)
+    return float((before.mean() + after.mean()) / 2.0), float((before != after).mean() / 2.0)
+
+
+def repeatability(pairs: pd.DataFrame, *, outcomes: tuple[str, ...] = CEILING_OUTCOMES, n_bootstrap: int = 200,
+                  seed: int = 0) -> pd.DataFrame:
+    """Per method and outcome of `pairs` (run_compare.paired_episodes' columns `<outcome>_before` /
+    `_after`, errors already left out): the paired episodes, the outcome's rate over both runs, the
+    fraction of episodes whose outcome differs, and the AUROC ceiling (`max_auroc`) with the 2.5 and
+    97.5 percentiles over `n_bootstrap` resamples of the episodes. Outcomes the pairs lack are skipped."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for method in dict.fromkeys(pairs["method"]):
+        group = pairs[pairs["method"] == method]
+        for outcome in outcomes:
+            if f"{outcome}_before" not in group.columns:
+                continue
+            a, b = group[f"{outcome}_before"].to_numpy(bool), group[f"{outcome}_after"].to_numpy(bool)
+            rate, noise = rate_and_noise(a, b)
+            resampled = []
+            for _ in range(n_bootstrap):
+                index = rng.integers(0, len(a), len(a))
+                resampled.append(max_auroc(*rate_and_noise(a[index], b[index])))
+            finite = [x for x in resampled if not np.isnan(x)]
+            low, high = np.percentile(finite, [2.5, 97.5]) if finite else (np.nan, np.nan)
+            rows.append({"method": method, "outcome": outcome, "paired": int(len(a)), "rate": rate,
+                         "changed": int((a != b).sum()), "changed_fraction": float((a != b).mean()),
+                         "auroc_ceiling": max_auroc(rate, noise), "auroc_ceiling_low": float(low), "auroc_ceiling_high": float(high)})
+    return pd.DataFrame(rows)
