@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
+import numpy as np
+
 from grits_lab.errors import ConfigError, StorageError
 
 if TYPE_CHECKING:  # annotations only
@@ -75,6 +77,41 @@ def method_checkpoints(name: str, checkpoints: CheckpointPaths) -> dict[str, str
             raise StorageError(f"method {name!r}: `checkpoints.{key}` not found: {path} (train it first)")
         out[key] = str(path)
     return out
+
+
+# Top-level checkpoint entries that are training state, not the model a method runs.
+_TRAINING_STATE = ("optimizer", "lr_scheduler", "torch_rng_processes")
+
+
+def weights_digest(path: str | Path) -> str | None:
+    """First 16 hex digits of the SHA-256 of a checkpoint's arrays (weights, EMA weights, normalizers:
+    every torch tensor and NumPy array, by its place in the file, dtype and shape), leaving out the
+    training state and everything else (paths, configs, history). Two files from the same training
+    on other paths have the same weights digest and different file digests. None for a directory."""
+    import torch
+
+    path = Path(path)
+    if path.is_dir():
+        return None
+    checkpoint = torch.load(path, map_location="cpu", weights_only=False)
+    digest = hashlib.sha256()
+
+    def visit(value: Any, where: str) -> None:
+        if isinstance(value, torch.Tensor):
+            value = value.detach().cpu().contiguous().numpy()
+        if isinstance(value, np.ndarray):
+            digest.update(f"{where}:{value.dtype}:{value.shape};".encode())
+            digest.update(np.ascontiguousarray(value).tobytes())
+        elif isinstance(value, dict):
+            for key in sorted(value, key=str):
+                if not (where == "" and key in _TRAINING_STATE):
+                    visit(value[key], f"{where}/{key}")
+        elif isinstance(value, (list, tuple)):
+            for i, item in enumerate(value):
+                visit(item, f"{where}[{i}]")
+
+    visit(checkpoint, "")
+    return digest.hexdigest()[:16]
 
 
 def file_digest(path: str | Path) -> str:

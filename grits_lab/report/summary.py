@@ -110,6 +110,15 @@ def stage_cause_table(episodes: pd.DataFrame) -> pd.DataFrame:
     return data.assign(method=data["variant"])[list(STAGE_COLUMNS)]
 
 
+def _weights_digests(runs: dict[str, Any], variant: str) -> dict[str, Any]:
+    """{"weights digests (sha256, first 16)": {key: digest}} of a method from the run's provenance.json,
+    which records them from scoop-v12's later runs on; {} before that."""
+    checkpoints = ((runs.get("methods") or {}).get(variant) or {}).get("checkpoints") or {}
+    weights = {key: entry["weights_sha256_16"] for key, entry in sorted(checkpoints.items())
+               if isinstance(entry, dict) and entry.get("weights_sha256_16")}
+    return {"weights digests (sha256, first 16)": weights} if weights else {}
+
+
 def summary_provenance(run: RunData, command: str) -> dict[str, Any]:
     """What produced the records (from the run's provenance.json and the records) and the summary."""
     episodes = run.episodes
@@ -127,6 +136,7 @@ def summary_provenance(run: RunData, command: str) -> dict[str, Any]:
             "foods": int(group["food_key"].nunique()),
             "levels": sorted(map(str, group["level"].unique())),
             "checkpoint digests (sha256, first 16)": digests,
+            **_weights_digests(runs, variant),
             "episode wall time (s, summed)": round(float(pd.to_numeric(group.get("wall_time_s"), errors="coerce").sum()), 1)
             if "wall_time_s" in group else None,
         }

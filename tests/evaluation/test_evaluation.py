@@ -241,3 +241,28 @@ def test_an_action_offset_moves_every_executed_scoop_action_rigidly_and_a_run_ho
                              scoop={"action_offset": 0.001}), progress=False)
     with pytest.raises(ConfigError, match="scoop.action_offset"):
         eval_config(models, tmp_path, scoop={"action_offset": -0.001})
+
+
+def test_the_weights_digest_names_the_model_whatever_path_the_checkpoint_stores(models, tmp_path):
+    """A checkpoint trained into another folder stores other paths: another file digest, the same weights
+    digest; another weight changes it. The run's provenance.json records both."""
+    import json
+
+    import torch
+
+    from grits_lab.evaluation.methods import file_digest, weights_digest
+
+    checkpoint = torch.load(models["policy"], map_location="cpu", weights_only=False)
+    moved = {**checkpoint, "train_config": {**checkpoint.get("train_config", {}), "output_dir": "elsewhere/policy"}}
+    torch.save(moved, tmp_path / "moved.pt")
+    assert file_digest(tmp_path / "moved.pt") != file_digest(models["policy"])
+    assert weights_digest(tmp_path / "moved.pt") == weights_digest(models["policy"])
+    first = next(iter(moved["policy"]["model"]))
+    moved["policy"]["model"][first] = moved["policy"]["model"][first] + 1e-6
+    torch.save(moved, tmp_path / "changed.pt")
+    assert weights_digest(tmp_path / "changed.pt") != weights_digest(models["policy"])
+    assert weights_digest(models["demos"]) is None  # a dataset directory has no weights
+    evaluate(eval_config(models, tmp_path / "run", methods=["dp"], scoop={"max_steps": 12, "min_steps": 0}), progress=False)
+    recorded = json.loads((tmp_path / "run" / "provenance.json").read_text())["methods"]["dp"]["checkpoints"]["policy"]
+    assert recorded == {"path": models["policy"], "sha256_16": file_digest(models["policy"]),
+                        "weights_sha256_16": weights_digest(models["policy"])}
