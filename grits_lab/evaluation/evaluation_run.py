@@ -214,14 +214,19 @@ def _refuse_other_checkpoints(records_path: Path, done: list[dict[str, Any]], pa
                     f"{path} has digest {digests[path]}; rerun with --restart to discard the records, or choose another output_dir")
 
 
-def _refuse_other_action_offset(records_path: Path, done: list[dict[str, Any]], offset: float) -> None:
-    """Records whose scoop ran with another `scoop.action_offset` are not resumed under this one (a run
-    directory holds one; records from before the column ran without any): InputError naming both."""
-    recorded = {float(r.get("scoop_action_offset_m") if _present(r.get("scoop_action_offset_m")) else 0.0) for r in done}
-    other = sorted(recorded - {float(offset)})
+def _refuse_other_action_offset(records_path: Path, done: list[dict[str, Any]], offset: float, draw: int) -> None:
+    """Records whose scoop ran with another `scoop.action_offset` (or `action_offset_draw`) are not resumed
+    under this one (a run directory holds one; records from before the columns ran without any):
+    InputError naming both."""
+    def recorded(r: dict[str, Any], column: str, kind: type) -> Any:
+        return kind(r[column]) if _present(r.get(column)) else kind(0)
+
+    other = sorted({(recorded(r, "scoop_action_offset_m", float), recorded(r, "scoop_action_offset_draw", int)) for r in done}
+                   - {(float(offset), int(draw))})
     if other:
-        raise InputError(f"{records_path} holds episodes run with `scoop.action_offset` {other[0]:g} m, but the config sets "
-                         f"{float(offset):g} m; choose another output_dir (or rerun with --restart to discard them)")
+        raise InputError(f"{records_path} holds episodes run with `scoop.action_offset` {other[0][0]:g} m (draw {other[0][1]}), "
+                         f"but the config sets {float(offset):g} m (draw {int(draw)}); choose another output_dir "
+                         "(or rerun with --restart to discard them)")
 
 
 def _present(value: Any) -> bool:
@@ -289,7 +294,8 @@ def _evaluate_in(out: Path, config: EvaluationConfig, specs: list[EpisodeSpec], 
     done = [] if restart else _load_existing(records_path)
     _refuse_other_protocol(records_path, done)
     _refuse_other_checkpoints(records_path, done, paths, digests)
-    _refuse_other_action_offset(records_path, done, config.scoop.action_offset)
+    _refuse_other_action_offset(records_path, done, config.scoop.action_offset,
+                                config.scoop.action_offset_draw if config.scoop.action_offset else 0)
     recorded_methods = list(dict.fromkeys(str(r["method"]) for r in done))
     from grits_lab.evaluation.custom_methods import registered_methods
 

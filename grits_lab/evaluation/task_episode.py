@@ -349,6 +349,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         "plan_time_max_s": scoop["plan_time_max_s"],
         "scoop_time_s": scoop_time,
         "scoop_action_offset_m": float(config.scoop.action_offset),
+        "scoop_action_offset_draw": int(config.scoop.action_offset_draw) if config.scoop.action_offset else 0,
         **summarize_guidance(scoop["diagnostics"]),
     }
     transferred, spilled_total, transfer_time, final = 0, int(m["spilled"]), 0.0, m

@@ -58,6 +58,9 @@ class ScoopSettings:
     # run on the same seeds tells how often an outcome changes when the spoon goes where the policy
     # asked, give or take a distance no observation resolves (docs/evaluation.md, "Outcome sensitivity").
     action_offset: float = 0.0
+    # Which seeded set of directions the offset takes: 0, 1, ... give independent nudges of the same
+    # size on the same seeds (a second draw tells a nudge's chance part from the nudge's own effect).
+    action_offset_draw: int = 0
 
     def __post_init__(self) -> None:
         require(self.max_steps >= 1, "scoop.max_steps", self.max_steps, "at least 1")
@@ -67,14 +70,16 @@ class ScoopSettings:
         require(self.settle_steps >= 0, "scoop.settle_steps", self.settle_steps, "non-negative")
         require(0.0 <= self.action_offset <= 0.01, "scoop.action_offset", self.action_offset,
                 "in [0, 0.01] metres (a diagnostic nudge, not a motion: 0.0005 is half a millimetre)")
+        require(self.action_offset_draw >= 0, "scoop.action_offset_draw", self.action_offset_draw, "non-negative")
 
     def offset_vector(self, seed: int) -> np.ndarray:
         """(9,) what is added to every executed scoop action: `action_offset` metres in position along
-        a unit direction drawn uniformly on the sphere from `seed` (the episode's), no rotation.
-        Zeros when `action_offset` is 0."""
+        a unit direction drawn uniformly on the sphere from `seed` (the episode's) and
+        `action_offset_draw`, no rotation. Zeros when `action_offset` is 0."""
         offset = np.zeros(9)
         if self.action_offset > 0.0:
-            direction = np.random.default_rng(derive_seed(int(seed), "action-offset")).normal(size=3)
+            draw = ("action-offset",) if self.action_offset_draw == 0 else ("action-offset", self.action_offset_draw)
+            direction = np.random.default_rng(derive_seed(int(seed), *draw)).normal(size=3)
             offset[:3] = self.action_offset * direction / np.linalg.norm(direction)
         return offset
 

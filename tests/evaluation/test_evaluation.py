@@ -236,6 +236,11 @@ def test_an_action_offset_moves_every_executed_scoop_action_rigidly_and_a_run_ho
     assert math.isclose(np.linalg.norm(expected[:3]), 0.003) and not expected[3:].any()
     assert not ScoopSettings().offset_vector(int(plain["seed"])).any()
     assert not np.allclose(ScoopSettings(action_offset=0.003).offset_vector(int(plain["seed"]) + 1), expected)
+    other_draw = ScoopSettings(action_offset=0.003, action_offset_draw=1).offset_vector(int(plain["seed"]))
+    assert math.isclose(np.linalg.norm(other_draw[:3]), 0.003) and not np.allclose(other_draw, expected)
+    with pytest.raises(InputError, match="draw 0"):
+        evaluate(eval_config(models, tmp_path / "offset_0.003", methods=["expert"], rollout_chunks=True,
+                             scoop={"action_offset": 0.003, "action_offset_draw": 1}), progress=False)
     with pytest.raises(InputError, match="scoop.action_offset"):
         evaluate(eval_config(models, tmp_path / "offset_0.0", methods=["expert"], rollout_chunks=True,
                              scoop={"action_offset": 0.001}), progress=False)
