@@ -12,6 +12,7 @@ code that drew the report.
 
 from __future__ import annotations
 
+import functools
 import platform
 import subprocess
 from importlib import metadata
@@ -46,3 +47,51 @@ def package_versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             continue
     return versions
+
+
+def cpu_model() -> str:
+    """The CPU's model name from /proc/cpuinfo (`platform.processor()` elsewhere); `unknown` when neither says."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def cpu_kernels() -> str:
+    """The SIMD kernels this process's numeric libraries run, as one label, e.g.
+    `numpy X86_V3+X86_V4+AVX512_ICL; openblas SkylakeX; torch AVX512`.
+
+    NumPy, OpenBLAS and torch each pick kernels for the CPU at run time (NPY_DISABLE_CPU_FEATURES,
+    OPENBLAS_CORETYPE and ATEN_CPU_CAPABILITY override the pick), and kernels of different widths
+    round differently in the last bits. Contact amplifies those bits into another episode
+    (docs/evaluation.md "Outcome sensitivity"), so two records of one seed with different labels
+    are not expected to be equal, and a replay on other kernels is not expected to match. torch is
+    named only when this process has imported it (the methods that run a network do).
+    """
+    import sys
+
+    return _cpu_kernels("torch" in sys.modules)
+
+
+@functools.lru_cache(maxsize=2)
+def _cpu_kernels(with_torch: bool) -> str:
+    import sys
+
+    import numpy  # noqa: F401  (loads OpenBLAS, for threadpoolctl to find)
+    import threadpoolctl
+
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    except ImportError:  # NumPy 1.x
+        from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    parts = ["numpy " + ("+".join(f for f in __cpu_dispatch__ if __cpu_features__.get(f)) or "baseline")]
+    for info in threadpoolctl.threadpool_info():
+        if info.get("user_api") == "blas":
+            parts.append(f"{info.get('internal_api')} {info.get('architecture') or '?'}")
+    if with_torch:
+        torch = sys.modules["torch"]
+        parts.append(f"torch {torch.backends.cpu.get_cpu_capability()}")
+    return "; ".join(parts)

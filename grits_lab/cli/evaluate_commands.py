@@ -40,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "Re-run the episode (method, food, level, trial) of an evaluation run directory from its record: "
             "the same seed, the run's config.yaml, the recorded guidance (rho, s) and the checkpoints, "
             "checked by digest. Compares every recorded metric with the replay (exit code 0: equal, 1: "
-            "diverged) and, with --video, writes a captioned video from a camera that shows the spoon and both bowls."
+            "diverged; a divergence on other CPU kernels than the record's says so) and, with --video, writes a captioned video from a camera that shows the spoon and both bowls."
         ),
     )
     replay.add_argument("run_dir", help="run directory of `grits-lab evaluate` (episodes.parquet, config.yaml)")

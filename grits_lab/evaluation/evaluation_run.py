@@ -248,7 +248,7 @@ def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], diges
                earlier: dict[str, Any] | None = None) -> dict[str, Any]:
     """What produced the records; `earlier`: entries of methods recorded by earlier runs into the same
     directory, kept (under the current entry where this run evaluates the method again)."""
-    from grits_lab.versions import git_commit, package_versions
+    from grits_lab.versions import cpu_kernels, cpu_model, git_commit, package_versions
 
     # what a file digest cannot tell: whether two checkpoints on other paths hold the same model
     weights = {p: weights_digest(p) for by_key in paths.values() for p in by_key.values()}
@@ -268,6 +268,8 @@ def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], diges
         "seed rule": "derive_seed(root seed, food, level, trial), the same for every method",
         "episodes planned": n_episodes,
         "host": platform.node(),
+        "cpu": cpu_model(),
+        "cpu kernels": cpu_kernels(),  # the driver's; each record names its worker's (`cpu_kernels`)
         "packages": package_versions(),
     }
 

@@ -22,8 +22,9 @@ import pandas as pd
 
 from grits_lab.errors import InputError, StorageError
 
-# Record columns that measure time or name the run: they differ between a run and its replay.
-NOT_COMPARED = frozenset({"wall_time_s", "scoop_time_s", "transfer_time_s", "plan_time_mean_s", "plan_time_max_s"})
+# Record columns that measure time or name the machine: they differ between a run and its replay.
+KERNELS = "cpu_kernels"  # grits_lab/versions.py `cpu_kernels`
+NOT_COMPARED = frozenset({"wall_time_s", "scoop_time_s", "transfer_time_s", "plan_time_mean_s", "plan_time_max_s", KERNELS})
 
 
 @dataclass
@@ -45,6 +46,8 @@ class ReplayResult:
     replayed: dict[str, Any] = field(default_factory=dict)
     plan_figure: str | None = None
     unrecorded: dict[str, Any] = field(default_factory=dict)
+    recorded_kernels: str | None = None
+    replayed_kernels: str | None = None
 
     @property
     def matches(self) -> bool:
@@ -57,6 +60,7 @@ class ReplayResult:
             "compared": self.compared, "mismatches": {k: [_plain(a), _plain(b)] for k, (a, b) in self.mismatches.items()},
             "video": self.video, "frames": self.frames, "plan_figure": self.plan_figure,
             "unrecorded": {k: _plain(v) for k, v in self.unrecorded.items()},
+            "recorded_kernels": self.recorded_kernels, "replayed_kernels": self.replayed_kernels,
         }
 
     def describe(self) -> str:
@@ -67,7 +71,16 @@ class ReplayResult:
         if self.matches:
             return f"{head}: replay reproduces the record ({len(self.compared)} metrics equal){tail}"
         diffs = ", ".join(f"{k} {_plain(a)} -> {_plain(b)}" for k, (a, b) in self.mismatches.items())
-        return f"{head}: replay DIVERGED from the record{self.divergence_step()}: {diffs}{tail}"
+        return f"{head}: replay DIVERGED from the record{self.divergence_step()}: {diffs}{tail}{self.kernels_note()}"
+
+    def kernels_note(self) -> str:
+        """Why a divergence may be expected: the record was made on other CPU kernels, or on kernels it does not name."""
+        if self.recorded_kernels is None:
+            return f" (the record does not name its CPU kernels; replayed on {self.replayed_kernels})"
+        if self.recorded_kernels != self.replayed_kernels:
+            return (f" (recorded on CPU kernels `{self.recorded_kernels}`, replayed on `{self.replayed_kernels}`: "
+                    "kernels of another width round differently and contact amplifies it, docs/evaluation.md \"Outcome sensitivity\")")
+        return ""
 
     def divergence_step(self) -> str:
         steps = []
@@ -295,8 +308,11 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
                   and (k not in record or (_plain(record[k]) is None and _plain(v) is not None))}
     compared = sorted(k for k in replayed if k in record and k not in NOT_COMPARED and k not in unrecorded)
     mismatches = {k: (record[k], replayed[k]) for k in compared if not _equal(record[k], replayed[k])}
+    recorded_kernels = record.get(KERNELS)
     result = ReplayResult(method, food, str(level), int(trial), int(record["seed"]), rho, s, compared, mismatches,
-                          replayed=replayed, unrecorded=unrecorded)
+                          replayed=replayed, unrecorded=unrecorded,
+                          recorded_kernels=None if _plain(recorded_kernels) is None else str(recorded_kernels),
+                          replayed_kernels=replayed.get(KERNELS))
     if video is not None:
         result.video = str(write_video(video, played.frames, fps=config.sim.control_hz / played._every))
         result.frames = len(played.frames)

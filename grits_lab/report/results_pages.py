@@ -211,9 +211,13 @@ def provenance_block(root: Path, name: str, here: Path) -> str:
     packages = p.get("machine", {}).get("packages", {})
     shown = ", ".join(f"{k} {packages[k]}" for k in ("python", "torch", "numpy", "pybullet") if k in packages)
     records_commit = p.get("records' code commit")
+    machine = p.get("machine", {})
+    kernels = machine.get("cpu kernels (episodes)", {})
+    cpu = (f"; CPU {machine['cpu']}" if machine.get("cpu") else "") + (
+        "; CPU kernels " + ", ".join(f"`{k}` ({n} episode{'' if n == 1 else 's'})" for k, n in kernels.items()) if kernels else "")
     lines = [
         f"- Protocol: {', '.join(p.get('protocol', [])) or 'not recorded'}; records' code: `{records_commit}`.",
-        f"- Machine: host `{p.get('machine', {}).get('host')}`{'; ' + shown if shown else ''}; run started {p.get('run started (UTC)')} UTC.",
+        f"- Machine: host `{machine.get('host')}`{'; ' + shown if shown else ''}{cpu}; run started {p.get('run started (UTC)')} UTC.",
         f"- Episode wall time, summed: {_duration(p.get('episode wall time (s, summed)'))}.",
     ]
     for method in p.get("methods", {}).values():

@@ -30,6 +30,7 @@ from grits_lab.report.vocabulary import method_display
 
 PAIR_KEYS = ("method", "food", "level", "trial")
 OFFSET_COLUMN = "scoop_action_offset_m"  # `scoop.action_offset` of the run (docs/evaluation.md, "Outcome sensitivity")
+KERNELS_COLUMN = "cpu_kernels"  # the CPU kernels an episode ran on (grits_lab/versions.py `cpu_kernels`)
 COMPARISON_FILE = "comparison.csv"
 PAIRED_METHODS_FILE = "paired.csv"
 PAIR_REFERENCE = "dp"  # the unguided policy every guided variant is compared with
@@ -116,6 +117,8 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
     are left out (`errors` counts them)."""
     # records from before the offset column ran without one; both sides hold it, so the merge suffixes it
     before, after = (f if OFFSET_COLUMN in f.columns else f.assign(**{OFFSET_COLUMN: 0.0}) for f in (before, after))
+    # and records from before the kernels column do not say what they ran on
+    before, after = (f if KERNELS_COLUMN in f.columns else f.assign(**{KERNELS_COLUMN: None}) for f in (before, after))
     both = paired_episodes(before, after)
     rows = []
     for method in dict.fromkeys(both["method"]):
@@ -129,13 +132,18 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
         row = {"method": method, "paired": int(len(pairs)), "errors": int(errors.sum()), "scoop_equal": int(same.sum())}
         for side in ("before", "after"):
             row[f"action_offset_{side}_m"] = float(pairs[f"{OFFSET_COLUMN}_{side}"].fillna(0.0).max()) if len(pairs) else 0.0
+            labels = pairs[f"{KERNELS_COLUMN}_{side}"].dropna().astype(str)
+            row[f"cpu_kernels_{side}"] = labels.mode().iloc[0] if len(labels) else ""
+        kb, ka = pairs[f"{KERNELS_COLUMN}_before"], pairs[f"{KERNELS_COLUMN}_after"]
+        row["kernels_differ"] = int((kb.notna() & ka.notna() & (kb.astype(str) != ka.astype(str))).sum())
         for outcome in PAIRED_OUTCOMES:
             a, b = pairs[f"{outcome}_before"].astype(bool), pairs[f"{outcome}_after"].astype(bool)
             row.update({f"{outcome}_before": int(a.sum()), f"{outcome}_after": int(b.sum()),
                         f"{outcome}_only_before": int((a & ~b).sum()), f"{outcome}_only_after": int((b & ~a).sum())})
             row[f"{outcome}_p"] = sign_test_p(row[f"{outcome}_only_before"], row[f"{outcome}_only_after"])
-        if row["action_offset_before_m"] != row["action_offset_after_m"] and len(pairs):
-            # one run nudges the scoop where the other does not: each outcome's changes are its chance part
+        if len(pairs) and (row["action_offset_before_m"] != row["action_offset_after_m"] or row["kernels_differ"] == len(pairs)):
+            # one run nudges the scoop where the other does not, or every pair ran on other CPU kernels:
+            # each outcome's changes are its chance part
             for _, c in repeatability(pairs).iterrows():
                 row.update({f"{c['outcome']}_{k}": c[k] for k in ("auroc_ceiling", "auroc_ceiling_low", "auroc_ceiling_high")})
         rows.append(row)
@@ -220,14 +228,21 @@ def comparison_markdown(table: pd.DataFrame) -> str:
     if any(offsets.values()):
         lines[-1] += (f" Scoop actions offset (`scoop.action_offset`): {offsets.get('before', 0.0) * 1000:g} mm in {before}, "
                       f"{offsets.get('after', 0.0) * 1000:g} mm in {after}: the changes are what that offset did.")
+    differ = int(table["kernels_differ"].sum()) if "kernels_differ" in table.columns else 0
+    if differ:
+        first = table[table["kernels_differ"] > 0].iloc[0]
+        lines[-1] += (f" {differ} of {int(table['paired'].sum())} pairs ran on other CPU kernels, e.g. `{first['cpu_kernels_before']}` "
+                      f"in {before}, `{first['cpu_kernels_after']}` in {after}: kernels of another width round differently, "
+                      "and the changes include what that did.")
+    perturbation = " and ".join(p for p, held in (("offset", any(offsets.values())), ("kernels", differ)) if held) or "offset"
     ceilings = [o for o in CEILING_OUTCOMES if f"{o}_auroc_ceiling" in table.columns]
     if ceilings:
         rows = [[method_display(row["method"]), PAIRED_OUTCOMES[o],
                  f"{(row[f'{o}_before'] + row[f'{o}_after']) / (2 * row['paired']):.0%}",
                  f"{row[f'{o}_only_before'] + row[f'{o}_only_after']}/{row['paired']}", _ceiling_cell(row, o)]
                 for _, row in table.iterrows() for o in ceilings if f"{o}_auroc_ceiling" in row and not pd.isna(row[f"{o}_auroc_ceiling"])]
-        lines += ["", markdown_table(["Method", "Outcome", "Rate, both runs", "Changed by the offset", "AUROC ceiling [95 %]"], rows), "",
-                  "The offset is taken as chance the observations cannot show: each episode a coin, its two runs two tosses. "
+        lines += ["", markdown_table(["Method", "Outcome", "Rate, both runs", f"Changed by the {perturbation}", "AUROC ceiling [95 %]"], rows), "",
+                  f"The {perturbation} is taken as chance the observations cannot show: each episode a coin, its two runs two tosses. "
                   "AUROC ceiling: the best any predictor of what both runs share can rank the outcome, over every coin mix "
                   "with the measured rate and changes (grits_lab/report/outcome_ceiling.py); interval from resampling "
                   "episodes (200 resamples)."]

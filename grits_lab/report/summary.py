@@ -119,6 +119,19 @@ def _weights_digests(runs: dict[str, Any], variant: str) -> dict[str, Any]:
     return {"weights digests (sha256, first 16)": weights} if weights else {}
 
 
+def _machine(runs: dict[str, Any], episodes: pd.DataFrame) -> dict[str, Any]:
+    """Host, CPU and packages from provenance.json, and episodes per CPU-kernel label from the records
+    (`cpu_kernels`, grits_lab/versions.py); the CPU entries only where the run recorded them."""
+    machine: dict[str, Any] = {"host": runs.get("host")}
+    if runs.get("cpu"):
+        machine["cpu"] = runs["cpu"]
+    if "cpu_kernels" in episodes and episodes["cpu_kernels"].notna().any():
+        counts = episodes["cpu_kernels"].dropna().astype(str).value_counts()
+        machine["cpu kernels (episodes)"] = {str(k): int(v) for k, v in sorted(counts.items())}
+    machine["packages"] = runs.get("packages", {})
+    return machine
+
+
 def summary_provenance(run: RunData, command: str) -> dict[str, Any]:
     """What produced the records (from the run's provenance.json and the records) and the summary."""
     episodes = run.episodes
@@ -146,7 +159,7 @@ def summary_provenance(run: RunData, command: str) -> dict[str, Any]:
         "protocol": sorted(map(str, episodes["protocol"].unique())) if "protocol" in episodes else [],
         "records' code commit": runs.get("code git commit"),
         "run started (UTC)": runs.get("started (UTC)"),
-        "machine": {"host": runs.get("host"), "packages": runs.get("packages", {})},
+        "machine": _machine(runs, episodes),
         "episodes": int(len(episodes)),
         "episode wall time (s, summed)": round(float(pd.to_numeric(episodes["wall_time_s"], errors="coerce").sum()), 1)
         if "wall_time_s" in episodes else None,

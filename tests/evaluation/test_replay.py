@@ -218,3 +218,21 @@ def test_the_filmed_and_counted_envs_see_the_actions_of_the_smooth_stages_too():
         assert len(filmed.frames) == 3 and len(ticks) == 2  # the reset's frame, then one per action
     finally:
         env.close()
+
+
+def test_a_diverged_replay_names_the_cpu_kernels_of_record_and_replay(run, tmp_path):
+    run_dir, records = run
+    dp = records["method"] == "dp"
+    recorded = str(records.loc[dp, "cpu_kernels"].iloc[0])
+    assert recorded.startswith("numpy ") and "torch " in recorded  # the worker ran a network
+    frame = records.copy()
+    frame.loc[dp, "scooped"] += 1
+    same = replay_episode(run_copy(run_dir, tmp_path / "same", frame), **episode(records, "dp"))
+    assert same.recorded_kernels == same.replayed_kernels == recorded
+    assert "kernels" not in same.describe()  # a divergence on the same kernels is the code's or the record's
+    frame.loc[dp, "cpu_kernels"] = "numpy X86_V3; openblas Haswell; torch AVX2"
+    other = replay_episode(run_copy(run_dir, tmp_path / "other", frame), **episode(records, "dp"))
+    assert list(other.mismatches) == ["scooped"]  # the label itself is never compared
+    assert f"recorded on CPU kernels `numpy X86_V3; openblas Haswell; torch AVX2`, replayed on `{recorded}`" in other.describe()
+    older = replay_episode(run_copy(run_dir, tmp_path / "older", frame.drop(columns=["cpu_kernels"])), **episode(records, "dp"))
+    assert "the record does not name its CPU kernels" in older.describe() and "cpu_kernels" not in older.unrecorded

@@ -11,7 +11,7 @@ import pytest
 
 from grits_lab.cli import main
 from grits_lab.errors import InputError
-from grits_lab.report.results_pages import drifted, render_all, write_all
+from grits_lab.report.results_pages import drifted, provenance_block, render_all, write_all
 from grits_lab.sim.spill_metrics import attribution_columns
 from tests.report.synthetic_records import episode
 
@@ -161,3 +161,20 @@ def test_a_page_is_a_run_the_report_reads_so_a_protocol_split_across_sittings_is
 
     with pytest.raises(InputError, match="hold the same episode"):
         load_run(runs["first"], also=[docs / "first"])
+
+
+def test_the_summary_counts_episodes_per_cpu_kernels_and_the_page_names_them(tmp_path):
+    run = _records(tmp_path)
+    frame = pd.read_parquet(run / "episodes.parquet")
+    frame["cpu_kernels"] = ["numpy X86_V3; openblas Haswell"] * 3 + ["numpy X86_V3+X86_V4; openblas SkylakeX"]
+    frame.to_parquet(run / "episodes.parquet")
+    provenance = json.loads((run / "provenance.json").read_text())
+    (run / "provenance.json").write_text(json.dumps({**provenance, "cpu": "AMD EPYC"}))
+    out = tmp_path / "docs" / "experiments" / "tiny"
+    assert main(["report", str(run), "--output-dir", str(tmp_path / "report"), "--summary-to", str(out)]) == 0
+    machine = json.loads((out / "provenance.json").read_text())["machine"]
+    assert machine["cpu"] == "AMD EPYC" and machine["host"] == "box"
+    assert machine["cpu kernels (episodes)"] == {"numpy X86_V3+X86_V4; openblas SkylakeX": 1, "numpy X86_V3; openblas Haswell": 3}
+    block = provenance_block(tmp_path, "tiny", out)
+    assert ("; CPU AMD EPYC; CPU kernels `numpy X86_V3+X86_V4; openblas SkylakeX` (1 episode), "
+            "`numpy X86_V3; openblas Haswell` (3 episodes); run started") in block

@@ -181,3 +181,22 @@ def test_a_run_with_offset_scoop_actions_is_named_in_the_caption(tmp_path, capsy
     assert (table.loc["dp", "action_offset_before_m"], table.loc["dp", "action_offset_after_m"]) == (0.0, 0.0005)
     assert main(["compare-runs", str(tmp_path / "base"), str(tmp_path / "base")]) == 0
     assert "action_offset" not in (out := capsys.readouterr().out) and "AUROC ceiling" not in out
+
+
+def test_runs_on_other_cpu_kernels_are_named_and_get_the_ceiling(tmp_path, capsys):
+    wide, narrow = "numpy X86_V3+X86_V4; openblas SkylakeX; torch AVX512", "numpy X86_V3; openblas Haswell; torch AVX2"
+    _run([("success", 40, 0), ("spill", 40, 0)], tmp_path, "here").assign(cpu_kernels=wide).to_parquet(tmp_path / "here" / "episodes.parquet")
+    _run([("spill", 40, 0), ("spill", 40, 0)], tmp_path, "there").assign(cpu_kernels=narrow).to_parquet(tmp_path / "there" / "episodes.parquet")
+    assert main(["compare-runs", str(tmp_path / "here"), str(tmp_path / "there"), "--output-dir", str(tmp_path / "cmp")]) == 0
+    out = capsys.readouterr().out
+    assert f"2 of 2 pairs ran on other CPU kernels, e.g. `{wide}` in here, `{narrow}` in there" in out
+    assert "| Outcome | Rate, both runs | Changed by the kernels |" in out
+    assert "| Diffusion Policy | spill during the scoop | 75% | 1/2 |" in out
+    table = pd.read_csv(tmp_path / "cmp" / "comparison.csv").set_index("method")
+    assert table.loc["dp", "kernels_differ"] == 2 and table.loc["dp", "cpu_kernels_after"] == narrow
+    # The same kernels, or a run that did not record them, claim nothing.
+    assert main(["compare-runs", str(tmp_path / "here"), str(tmp_path / "here")]) == 0
+    assert "CPU kernels" not in (out := capsys.readouterr().out) and "AUROC ceiling" not in out
+    _run([("spill", 40, 0), ("spill", 40, 0)], tmp_path, "older")
+    assert main(["compare-runs", str(tmp_path / "here"), str(tmp_path / "older")]) == 0
+    assert "CPU kernels" not in (out := capsys.readouterr().out) and "AUROC ceiling" not in out
