@@ -30,6 +30,7 @@ from grits_lab.report.vocabulary import method_display
 
 PAIR_KEYS = ("method", "food", "level", "trial")
 OFFSET_COLUMN = "scoop_action_offset_m"  # `scoop.action_offset` of the run (docs/evaluation.md, "Outcome sensitivity")
+DRAW_COLUMN = "scoop_action_offset_draw"  # `scoop.action_offset_draw`: which seeded directions
 KERNELS_COLUMN = "cpu_kernels"  # the CPU kernels an episode ran on (grits_lab/versions.py `cpu_kernels`)
 COMPARISON_FILE = "comparison.csv"
 PAIRED_METHODS_FILE = "paired.csv"
@@ -117,6 +118,7 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
     are left out (`errors` counts them)."""
     # records from before the offset column ran without one; both sides hold it, so the merge suffixes it
     before, after = (f if OFFSET_COLUMN in f.columns else f.assign(**{OFFSET_COLUMN: 0.0}) for f in (before, after))
+    before, after = (f if DRAW_COLUMN in f.columns else f.assign(**{DRAW_COLUMN: 0}) for f in (before, after))
     # and records from before the kernels column do not say what they ran on
     before, after = (f if KERNELS_COLUMN in f.columns else f.assign(**{KERNELS_COLUMN: None}) for f in (before, after))
     both = paired_episodes(before, after)
@@ -132,6 +134,7 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
         row = {"method": method, "paired": int(len(pairs)), "errors": int(errors.sum()), "scoop_equal": int(same.sum())}
         for side in ("before", "after"):
             row[f"action_offset_{side}_m"] = float(pairs[f"{OFFSET_COLUMN}_{side}"].fillna(0.0).max()) if len(pairs) else 0.0
+            row[f"action_offset_draw_{side}"] = int(pairs[f"{DRAW_COLUMN}_{side}"].fillna(0).max()) if len(pairs) else 0
             labels = pairs[f"{KERNELS_COLUMN}_{side}"].dropna().astype(str)
             row[f"cpu_kernels_{side}"] = labels.mode().iloc[0] if len(labels) else ""
         kb, ka = pairs[f"{KERNELS_COLUMN}_before"], pairs[f"{KERNELS_COLUMN}_after"]
@@ -141,8 +144,10 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
             row.update({f"{outcome}_before": int(a.sum()), f"{outcome}_after": int(b.sum()),
                         f"{outcome}_only_before": int((a & ~b).sum()), f"{outcome}_only_after": int((b & ~a).sum())})
             row[f"{outcome}_p"] = sign_test_p(row[f"{outcome}_only_before"], row[f"{outcome}_only_after"])
-        if len(pairs) and (row["action_offset_before_m"] != row["action_offset_after_m"] or row["kernels_differ"] == len(pairs)):
-            # one run nudges the scoop where the other does not, or every pair ran on other CPU kernels:
+        nudged_apart = (row["action_offset_before_m"] != row["action_offset_after_m"]
+                        or row["action_offset_before_m"] > 0 and row["action_offset_draw_before"] != row["action_offset_draw_after"])
+        if len(pairs) and (nudged_apart or row["kernels_differ"] == len(pairs)):
+            # one run nudges the scoop where the other does not, or the other way, or every pair ran on other CPU kernels:
             # each outcome's changes are its chance part
             for _, c in repeatability(pairs).iterrows():
                 row.update({f"{c['outcome']}_{k}": c[k] for k in ("auroc_ceiling", "auroc_ceiling_low", "auroc_ceiling_high")})
@@ -226,8 +231,12 @@ def comparison_markdown(table: pd.DataFrame) -> str:
     offsets = {side: float(table[f"action_offset_{side}_m"].max()) for side in ("before", "after")
                if f"action_offset_{side}_m" in table.columns}
     if any(offsets.values()):
-        lines[-1] += (f" Scoop actions offset (`scoop.action_offset`): {offsets.get('before', 0.0) * 1000:g} mm in {before}, "
-                      f"{offsets.get('after', 0.0) * 1000:g} mm in {after}: the changes are what that offset did.")
+        draws = {side: int(table[f"action_offset_draw_{side}"].max()) if f"action_offset_draw_{side}" in table.columns else 0
+                 for side in ("before", "after")}
+        named = {side: f"{offsets.get(side, 0.0) * 1000:g} mm" + (f" (draw {draws[side]})" if offsets.get(side) and any(draws.values()) else "")
+                 for side in ("before", "after")}
+        lines[-1] += (f" Scoop actions offset (`scoop.action_offset`): {named['before']} in {before}, "
+                      f"{named['after']} in {after}: the changes are what that offset did.")
     differ = int(table["kernels_differ"].sum()) if "kernels_differ" in table.columns else 0
     if differ:
         first = table[table["kernels_differ"] > 0].iloc[0]

@@ -200,3 +200,16 @@ def test_runs_on_other_cpu_kernels_are_named_and_get_the_ceiling(tmp_path, capsy
     _run([("spill", 40, 0), ("spill", 40, 0)], tmp_path, "older")
     assert main(["compare-runs", str(tmp_path / "here"), str(tmp_path / "older")]) == 0
     assert "CPU kernels" not in (out := capsys.readouterr().out) and "AUROC ceiling" not in out
+
+
+def test_two_runs_nudged_along_other_draws_are_two_tosses(tmp_path, capsys):
+    _run([("success", 40, 0), ("spill", 40, 0)], tmp_path, "draw0").assign(
+        scoop_action_offset_m=0.0005, scoop_action_offset_draw=0).to_parquet(tmp_path / "draw0" / "episodes.parquet")
+    _run([("spill", 40, 0), ("spill", 40, 0)], tmp_path, "draw1").assign(
+        scoop_action_offset_m=0.0005, scoop_action_offset_draw=1).to_parquet(tmp_path / "draw1" / "episodes.parquet")
+    assert main(["compare-runs", str(tmp_path / "draw0"), str(tmp_path / "draw1")]) == 0
+    out = capsys.readouterr().out
+    assert "offset (`scoop.action_offset`): 0.5 mm (draw 0) in draw0, 0.5 mm (draw 1) in draw1" in out
+    assert "| Diffusion Policy | spill during the scoop | 75% | 1/2 |" in out
+    assert main(["compare-runs", str(tmp_path / "draw1"), str(tmp_path / "draw1")]) == 0
+    assert "AUROC ceiling" not in capsys.readouterr().out  # one draw against itself is one toss
