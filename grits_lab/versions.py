@@ -60,6 +60,7 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
+@functools.lru_cache(maxsize=1)
 def cpu_kernels() -> str:
     """The SIMD kernels this process's numeric libraries run, as one label, e.g.
     `numpy X86_V3+X86_V4+AVX512_ICL; openblas SkylakeX; torch AVX512`.
@@ -68,20 +69,12 @@ def cpu_kernels() -> str:
     OPENBLAS_CORETYPE and ATEN_CPU_CAPABILITY override the pick), and kernels of different widths
     round differently in the last bits. Contact amplifies those bits into another episode
     (docs/evaluation.md "Outcome sensitivity"), so two records of one seed with different labels
-    are not expected to be equal, and a replay on other kernels is not expected to match. torch is
-    named only when this process has imported it (the methods that run a network do).
+    are not expected to be equal, and a replay on other kernels is not expected to match. Imports
+    torch (once per process) so that the label is the same whatever the process ran before.
     """
-    import sys
-
-    return _cpu_kernels("torch" in sys.modules)
-
-
-@functools.lru_cache(maxsize=2)
-def _cpu_kernels(with_torch: bool) -> str:
-    import sys
-
     import numpy  # noqa: F401  (loads OpenBLAS, for threadpoolctl to find)
     import threadpoolctl
+    import torch
 
     try:
         from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
@@ -91,7 +84,5 @@ def _cpu_kernels(with_torch: bool) -> str:
     for info in threadpoolctl.threadpool_info():
         if info.get("user_api") == "blas":
             parts.append(f"{info.get('internal_api')} {info.get('architecture') or '?'}")
-    if with_torch:
-        torch = sys.modules["torch"]
-        parts.append(f"torch {torch.backends.cpu.get_cpu_capability()}")
+    parts.append(f"torch {torch.backends.cpu.get_cpu_capability()}")
     return "; ".join(parts)

@@ -20,6 +20,7 @@ from grits_lab.runners.executor_config import ExecutorConfig
 from grits_lab.runners.spec import EpisodeSpec
 from grits_lab.seeding import derive_seed, make_rng
 from grits_lab.sim.sim_config import SimConfig
+from grits_lab.versions import cpu_kernels
 
 TRAINING_FOODS = ["brown_rice", "soybeans", "mung_beans", "chocolate_balls", "dried_jujube", "orange"]
 
@@ -169,6 +170,7 @@ def demo_episode(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "target_bowl_x": float(env.target_bowl_pose()[0, 3]),
         "target_bowl_y": float(env.target_bowl_pose()[1, 3]),
         "spilled_any": bool(metrics["spilled"] > 0),
+        "cpu_kernels": cpu_kernels(),  # grits_lab/versions.py: what the worker computed with
         **{k: v for k, v in metrics.items() if isinstance(v, (bool, int, float, str)) or v is None},
         **metrics["spill_attribution"],
     }

@@ -32,6 +32,7 @@ from grits_lab.seeding import derive_seed, make_rng
 from grits_lab.sim.sim_config import SimConfig
 from grits_lab.sim.foods import SHAPES, ParticleRanges, primitive_food
 from grits_lab.task.transfer_settings import TransferSettings
+from grits_lab.versions import cpu_kernels
 
 # The carry after a trial's scoop: carry(env, cloud_builder, seed, settings) runs the evaluation's
 # transfer and pour on the live env and returns its measurements (grits_lab/evaluation/carry.py
@@ -510,6 +511,7 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "mass": float(component.get("mass_mean", 0.0)),
         "friction": float(component.get("lateral_friction_mean", 0.0)),
         "min_visible_food_points": int(min(visible)) if visible else -1,
+        "cpu_kernels": cpu_kernels(),  # grits_lab/versions.py: what the worker computed with
         **metrics["spill_attribution"],
     }
     if p.carry is not None:

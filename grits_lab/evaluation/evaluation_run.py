@@ -33,7 +33,7 @@ from grits_lab.evaluation.task_episode import evaluation_episode
 from grits_lab.evaluation.grid import EpisodeKey
 from grits_lab.evaluation.methods import (
     METHODS, check_method_checkpoints, file_digest, guidance_columns, guidance_gap, method_checkpoints, method_spec,
-    weights_digest,
+    trained_kernels, weights_digest,
 )
 from grits_lab.io import ensure_writable_dir, exclusive_directory, save_parquet_atomic, write_json_atomic, write_text_atomic
 from grits_lab.records import RECORD_COLUMNS, with_protocol
@@ -252,6 +252,7 @@ def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], diges
 
     # what a file digest cannot tell: whether two checkpoints on other paths hold the same model
     weights = {p: weights_digest(p) for by_key in paths.values() for p in by_key.values()}
+    trained = {p: trained_kernels(p) for by_key in paths.values() for p in by_key.values()}
     return {
         "run_id": config.run_id,
         "protocol": PROTOCOL,
@@ -260,7 +261,9 @@ def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], diges
         "config fingerprint": config_fingerprint(config),
         "methods": {**(earlier or {}),
                     **{m: {"description": method_spec(m, config).description,
-                           "checkpoints": {k: {"path": p, "sha256_16": digests[p], "weights_sha256_16": weights[p]} for k, p in paths[m].items()},
+                           "checkpoints": {k: {"path": p, "sha256_16": digests[p], "weights_sha256_16": weights[p],
+                                               **({"trained on cpu kernels": trained[p]} if trained[p] else {})}
+                                           for k, p in paths[m].items()},
                            "rho_s": list(guidance_columns(m, config))} for m in config.methods}},
         "guidance": config_to_dict(config.guidance),
         "posthoc": config_to_dict(config.posthoc),

@@ -114,6 +114,18 @@ def weights_digest(path: str | Path) -> str | None:
     return digest.hexdigest()[:16]
 
 
+def trained_kernels(path: str | Path) -> str | None:
+    """The CPU kernels a checkpoint was trained on (its `cpu_kernels`, grits_lab/versions.py), or None
+    for a directory or a checkpoint written before it was recorded."""
+    import torch
+
+    path = Path(path)
+    if path.is_dir():
+        return None
+    kernels = torch.load(path, map_location="cpu", weights_only=False).get("cpu_kernels")
+    return str(kernels) if kernels else None
+
+
 def file_digest(path: str | Path) -> str:
     """First 16 hex digits of the SHA-256 of a file, or of a directory's index (datasets)."""
     path = Path(path)

@@ -33,7 +33,7 @@ from grits_lab.training import (
     warmup_cosine,
 )
 from grits_lab.training.data_parallel import batch_share, reduce_gradients, run_processes
-from grits_lab.versions import PROTOCOL
+from grits_lab.versions import PROTOCOL, cpu_kernels
 
 
 @dataclass
@@ -209,6 +209,7 @@ def _train(
             return
         state = {
             "protocol": PROTOCOL,  # the task protocol of the code that trained it (docs/protocol.md)
+            "cpu_kernels": cpu_kernels(),  # what trained it: weights trained on other kernels differ (docs/evaluation.md)
             "policy": policy.policy_state(),  # type: ignore[operator]
             "ema": ema.state_dict() if ema is not None else None,
             "optimizer": optimizer.state_dict(),

@@ -112,11 +112,15 @@ def stage_cause_table(episodes: pd.DataFrame) -> pd.DataFrame:
 
 def _weights_digests(runs: dict[str, Any], variant: str) -> dict[str, Any]:
     """{"weights digests (sha256, first 16)": {key: digest}} of a method from the run's provenance.json,
-    which records them from scoop-v12's later runs on; {} before that."""
+    which records them from scoop-v12's later runs on; {} before that. With the CPU kernels each
+    checkpoint was trained on, where the checkpoint recorded them."""
     checkpoints = ((runs.get("methods") or {}).get(variant) or {}).get("checkpoints") or {}
     weights = {key: entry["weights_sha256_16"] for key, entry in sorted(checkpoints.items())
                if isinstance(entry, dict) and entry.get("weights_sha256_16")}
-    return {"weights digests (sha256, first 16)": weights} if weights else {}
+    trained = {key: entry["trained on cpu kernels"] for key, entry in sorted(checkpoints.items())
+               if isinstance(entry, dict) and entry.get("trained on cpu kernels")}
+    return ({"weights digests (sha256, first 16)": weights} if weights else {}) | (
+        {"trained on cpu kernels": trained} if trained else {})
 
 
 def _machine(runs: dict[str, Any], episodes: pd.DataFrame) -> dict[str, Any]:

@@ -21,7 +21,7 @@ from grits_lab.errors import ConfigError, StorageError
 from grits_lab.spillage.predictor_config import PredictorConfig
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
 from grits_lab.training.checkpoints import load_checkpoint, save_checkpoint
-from grits_lab.versions import PROTOCOL
+from grits_lab.versions import PROTOCOL, cpu_kernels
 
 CHECKPOINT_FORMAT = "grits-spillage-predictor/1"
 
@@ -59,6 +59,7 @@ def save_predictor(path: str | Path, *, config: PredictorConfig, model: Spillage
     payload = {
         "format": CHECKPOINT_FORMAT,
         "protocol": PROTOCOL,  # the task protocol of the code that trained it (docs/protocol.md)
+        "cpu_kernels": cpu_kernels(),  # what trained it: weights trained on other kernels differ (docs/evaluation.md)
         "config": config_to_dict(config),
         "model": model.state_dict(),
         "action_normalizer": action_normalizer.state_dict(),

@@ -250,7 +250,7 @@ def test_an_action_offset_moves_every_executed_scoop_action_rigidly_and_a_run_ho
 
 def test_the_weights_digest_names_the_model_whatever_path_the_checkpoint_stores(models, tmp_path):
     """A checkpoint trained into another folder stores other paths: another file digest, the same weights
-    digest; another weight changes it. The run's provenance.json records both."""
+    digest; another weight changes it. The run's provenance.json records both, and the CPU kernels it was trained on."""
     import json
 
     import torch
@@ -258,7 +258,10 @@ def test_the_weights_digest_names_the_model_whatever_path_the_checkpoint_stores(
     from grits_lab.evaluation.methods import file_digest, weights_digest
 
     checkpoint = torch.load(models["policy"], map_location="cpu", weights_only=False)
-    moved = {**checkpoint, "train_config": {**checkpoint.get("train_config", {}), "output_dir": "elsewhere/policy"}}
+    trained_on = checkpoint["cpu_kernels"]  # what the fixture's training computed with
+    assert trained_on.startswith("numpy ") and "; torch " in trained_on
+    moved = {**checkpoint, "train_config": {**checkpoint.get("train_config", {}), "output_dir": "elsewhere/policy"},
+             "cpu_kernels": "numpy X86_V3; openblas Haswell; torch AVX2"}
     torch.save(moved, tmp_path / "moved.pt")
     assert file_digest(tmp_path / "moved.pt") != file_digest(models["policy"])
     assert weights_digest(tmp_path / "moved.pt") == weights_digest(models["policy"])
@@ -270,4 +273,4 @@ def test_the_weights_digest_names_the_model_whatever_path_the_checkpoint_stores(
     evaluate(eval_config(models, tmp_path / "run", methods=["dp"], scoop={"max_steps": 12, "min_steps": 0}), progress=False)
     recorded = json.loads((tmp_path / "run" / "provenance.json").read_text())["methods"]["dp"]["checkpoints"]["policy"]
     assert recorded == {"path": models["policy"], "sha256_16": file_digest(models["policy"]),
-                        "weights_sha256_16": weights_digest(models["policy"])}
+                        "weights_sha256_16": weights_digest(models["policy"]), "trained on cpu kernels": trained_on}
