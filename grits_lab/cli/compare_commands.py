@@ -46,13 +46,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     runs.add_argument("before", metavar="BEFORE", help="run directory of `grits-lab evaluate` (the reference)")
     runs.add_argument("after", metavar="AFTER", help="run directory on the same seeds")
     runs.add_argument("--output-dir", metavar="DIR", help="also write comparison.csv and comparison.md there")
+    runs.add_argument("--ceiling", action="store_true",
+                      help="add the AUROC-ceiling table for runs that differ only by chance the records do not name "
+                           "(e.g. CPU kernels, for records made before `cpu_kernels` was recorded)")
     runs.set_defaults(handler=_compare_runs)
 
 
 def _compare_runs(args: argparse.Namespace) -> int:
     from grits_lab.report.run_compare import compare_run_dirs, write_comparison
 
-    table, markdown = compare_run_dirs(args.before, args.after)
+    table, markdown = compare_run_dirs(args.before, args.after, ceiling=args.ceiling)
     print(markdown)
     if args.output_dir:
         print(f"written: {', '.join(str(f) for f in write_comparison(table, markdown, args.output_dir))}")

@@ -111,11 +111,13 @@ def _equal(a: pd.Series, b: pd.Series) -> pd.Series:
     return (a == b) | (a.isna() & b.isna())
 
 
-def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
+def compare_runs(before: pd.DataFrame, after: pd.DataFrame, *, ceiling: bool = False) -> pd.DataFrame:
     """Per method (one row each, in `before`'s order): paired episodes, equal scoops, and for every
     outcome of `PAIRED_OUTCOMES` the columns `<outcome>_before`, `_after` (episodes with it),
     `_only_before`, `_only_after` and `_p` (`sign_test_p`). Episodes with an error in either run
-    are left out (`errors` counts them)."""
+    are left out (`errors` counts them). The AUROC-ceiling columns come when the runs differ by a nudge
+    (offset or draw) or every pair ran on other CPU kernels, or with `ceiling` (the caller declares the
+    runs two draws of one chance that the records do not name; `ceiling_declared`)."""
     # records from before the offset column ran without one; both sides hold it, so the merge suffixes it
     before, after = (f if OFFSET_COLUMN in f.columns else f.assign(**{OFFSET_COLUMN: 0.0}) for f in (before, after))
     before, after = (f if DRAW_COLUMN in f.columns else f.assign(**{DRAW_COLUMN: 0}) for f in (before, after))
@@ -146,7 +148,8 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame) -> pd.DataFrame:
             row[f"{outcome}_p"] = sign_test_p(row[f"{outcome}_only_before"], row[f"{outcome}_only_after"])
         nudged_apart = (row["action_offset_before_m"] != row["action_offset_after_m"]
                         or row["action_offset_before_m"] > 0 and row["action_offset_draw_before"] != row["action_offset_draw_after"])
-        if len(pairs) and (nudged_apart or row["kernels_differ"] == len(pairs)):
+        row["ceiling_declared"] = bool(ceiling)
+        if len(pairs) and (nudged_apart or row["kernels_differ"] == len(pairs) or ceiling):
             # one run nudges the scoop where the other does not, or the other way, or every pair ran on other CPU kernels:
             # each outcome's changes are its chance part
             for _, c in repeatability(pairs).iterrows():
@@ -243,7 +246,12 @@ def comparison_markdown(table: pd.DataFrame) -> str:
         lines[-1] += (f" {differ} of {int(table['paired'].sum())} pairs ran on other CPU kernels, e.g. `{first['cpu_kernels_before']}` "
                       f"in {before}, `{first['cpu_kernels_after']}` in {after}: kernels of another width round differently, "
                       "and the changes include what that did.")
-    perturbation = " and ".join(p for p, held in (("offset", any(offsets.values())), ("kernels", differ)) if held) or "offset"
+    declared = "ceiling_declared" in table.columns and bool(table["ceiling_declared"].fillna(False).astype(bool).any())
+    perturbation = " and ".join(p for p, held in (("offset", any(offsets.values())), ("kernels", differ)) if held) or (
+        "difference between the runs" if declared else "offset")
+    if declared and perturbation == "difference between the runs":
+        lines[-1] += (" The runs are compared as two draws of one chance (`--ceiling`): what differs between them is "
+                      "not in the records.")
     ceilings = [o for o in CEILING_OUTCOMES if f"{o}_auroc_ceiling" in table.columns]
     if ceilings:
         rows = [[method_display(row["method"]), PAIRED_OUTCOMES[o],
@@ -273,9 +281,9 @@ def write_comparison(table: pd.DataFrame, markdown: str, output_dir: str | Path)
     return [out / COMPARISON_FILE, out / "comparison.md"]
 
 
-def compare_run_dirs(before: str | Path, after: str | Path) -> tuple[pd.DataFrame, str]:
+def compare_run_dirs(before: str | Path, after: str | Path, *, ceiling: bool = False) -> tuple[pd.DataFrame, str]:
     """`compare_runs` on the records of two run directories, and its Markdown."""
-    table = compare_runs(_episodes(before), _episodes(after))
+    table = compare_runs(_episodes(before), _episodes(after), ceiling=ceiling)
     table.insert(0, "after", Path(after).name)
     table.insert(0, "before", Path(before).name)
     return table, comparison_markdown(table)

@@ -213,3 +213,15 @@ def test_two_runs_nudged_along_other_draws_are_two_tosses(tmp_path, capsys):
     assert "| Diffusion Policy | spill during the scoop | 75% | 1/2 |" in out
     assert main(["compare-runs", str(tmp_path / "draw1"), str(tmp_path / "draw1")]) == 0
     assert "AUROC ceiling" not in capsys.readouterr().out  # one draw against itself is one toss
+
+
+def test_a_declared_ceiling_pairs_runs_whose_records_do_not_name_their_difference(tmp_path, capsys):
+    _run([("success", 40, 0), ("spill", 40, 0)], tmp_path, "one")
+    _run([("spill", 40, 0), ("spill", 40, 0)], tmp_path, "two")
+    assert main(["compare-runs", str(tmp_path / "one"), str(tmp_path / "two")]) == 0
+    assert "AUROC ceiling" not in capsys.readouterr().out
+    assert main(["compare-runs", str(tmp_path / "one"), str(tmp_path / "two"), "--ceiling", "--output-dir", str(tmp_path / "cmp")]) == 0
+    out = capsys.readouterr().out
+    assert "compared as two draws of one chance (`--ceiling`)" in out
+    assert "| Diffusion Policy | spill during the scoop | 75% | 1/2 |" in out and "Changed by the difference between the runs" in out
+    assert bool(pd.read_csv(tmp_path / "cmp" / "comparison.csv")["ceiling_declared"].iloc[0])
