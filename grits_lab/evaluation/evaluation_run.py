@@ -18,6 +18,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import platform
+import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Iterable
@@ -229,6 +230,22 @@ def _refuse_other_action_offset(records_path: Path, done: list[dict[str, Any]], 
                          "(or rerun with --restart to discard them)")
 
 
+def other_kernels_note(records_path: Path, done: list[dict[str, Any]]) -> str:
+    """A warning line when records of the run directory name other CPU kernels than this process's
+    (`cpu_kernels`, grits_lab/versions.py), "" otherwise. A warning, not a refusal: a Ray cluster may
+    mix CPUs. Episodes on other kernels are other draws of the same seeds (docs/evaluation.md "Other CPUs")."""
+    from grits_lab.versions import cpu_kernels
+
+    here = cpu_kernels()
+    other = {str(r["cpu_kernels"]) for r in done if _present(r.get("cpu_kernels"))} - {here}
+    if not other:
+        return ""
+    n = sum(1 for r in done if _present(r.get("cpu_kernels")) and str(r["cpu_kernels"]) != here)
+    return (f"warning: {n} records in {records_path} ran on CPU kernels `{sorted(other)[0]}`"
+            f"{f' (and {len(other) - 1} other labels)' if len(other) > 1 else ''}, this machine runs `{here}`: the episodes "
+            "added now are other draws of their seeds, not repeats (docs/evaluation.md \"Other CPUs\")")
+
+
 def _present(value: Any) -> bool:
     return value is not None and not (isinstance(value, float) and math.isnan(value))
 
@@ -320,6 +337,8 @@ def _evaluate_in(out: Path, config: EvaluationConfig, specs: list[EpisodeSpec], 
             todo.append(spec)
     if progress and done:
         print(f"resuming {config.run_id}: {len(specs) - len(todo)} of {len(specs)} episodes already in {records_path}")
+    if todo and (note := other_kernels_note(records_path, done)):
+        print(note, file=sys.stderr)
     flush = lambda rows: save_parquet_atomic(records_path, records_frame(rows))
     if todo:
         own = executor is None

@@ -274,3 +274,14 @@ def test_the_weights_digest_names_the_model_whatever_path_the_checkpoint_stores(
     recorded = json.loads((tmp_path / "run" / "provenance.json").read_text())["methods"]["dp"]["checkpoints"]["policy"]
     assert recorded == {"path": models["policy"], "sha256_16": file_digest(models["policy"]),
                         "weights_sha256_16": weights_digest(models["policy"]), "trained on cpu kernels": trained_on}
+
+
+def test_resuming_records_of_other_cpu_kernels_warns_and_names_both(tmp_path):
+    from grits_lab.evaluation.evaluation_run import other_kernels_note
+    from grits_lab.versions import cpu_kernels
+
+    here, there = cpu_kernels(), "numpy OTHER; openblas OTHER; torch OTHER"  # no CPU reads so
+    path = tmp_path / "episodes.parquet"
+    assert other_kernels_note(path, [{"cpu_kernels": here}, {"cpu_kernels": None}, {}]) == ""  # own or unnamed: nothing to say
+    note = other_kernels_note(path, [{"cpu_kernels": here}, {"cpu_kernels": there}, {"cpu_kernels": there}])
+    assert note.startswith(f"warning: 2 records in {path} ran on CPU kernels `{there}`, this machine runs `{here}`")
