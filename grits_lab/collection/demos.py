@@ -16,6 +16,7 @@ import numpy as np
 
 from grits_lab.config import require
 from grits_lab.perception.composite import CloudConfig
+from grits_lab.records import CPU_KERNELS
 from grits_lab.runners.executor_config import ExecutorConfig
 from grits_lab.runners.spec import EpisodeSpec
 from grits_lab.seeding import derive_seed, make_rng
@@ -170,7 +171,7 @@ def demo_episode(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "target_bowl_x": float(env.target_bowl_pose()[0, 3]),
         "target_bowl_y": float(env.target_bowl_pose()[1, 3]),
         "spilled_any": bool(metrics["spilled"] > 0),
-        "cpu_kernels": cpu_kernels(),  # grits_lab/versions.py: what the worker computed with
+        CPU_KERNELS: cpu_kernels(),  # grits_lab/versions.py: what the worker computed with
         **{k: v for k, v in metrics.items() if isinstance(v, (bool, int, float, str)) or v is None},
         **metrics["spill_attribution"],
     }

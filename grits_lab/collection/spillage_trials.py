@@ -26,6 +26,7 @@ import numpy as np
 from grits_lab.config import require
 from grits_lab.data.chunk_labels import TRIAL_LABELS, Label, chunk_labels, horizon_labels
 from grits_lab.perception.composite import CloudConfig
+from grits_lab.records import CPU_KERNELS
 from grits_lab.runners.executor_config import ExecutorConfig
 from grits_lab.runners.spec import EpisodeSpec
 from grits_lab.seeding import derive_seed, make_rng
@@ -511,7 +512,7 @@ def spillage_trial(spec: EpisodeSpec, context: Any) -> dict[str, Any]:
         "mass": float(component.get("mass_mean", 0.0)),
         "friction": float(component.get("lateral_friction_mean", 0.0)),
         "min_visible_food_points": int(min(visible)) if visible else -1,
-        "cpu_kernels": cpu_kernels(),  # grits_lab/versions.py: what the worker computed with
+        CPU_KERNELS: cpu_kernels(),  # grits_lab/versions.py: what the worker computed with
         **metrics["spill_attribution"],
     }
     if p.carry is not None:

@@ -34,10 +34,10 @@ from grits_lab.evaluation.task_episode import evaluation_episode
 from grits_lab.evaluation.grid import EpisodeKey
 from grits_lab.evaluation.methods import (
     METHODS, check_method_checkpoints, file_digest, guidance_columns, guidance_gap, method_checkpoints, method_spec,
-    trained_kernels, weights_digest,
+    checkpoint_identity,
 )
 from grits_lab.io import ensure_writable_dir, exclusive_directory, save_parquet_atomic, write_json_atomic, write_text_atomic
-from grits_lab.records import RECORD_COLUMNS, with_protocol
+from grits_lab.records import CPU_KERNELS, RECORD_COLUMNS, with_protocol
 from grits_lab.runners import EpisodeResult, EpisodeSpec, make_executor
 from grits_lab.runners.base import Executor
 from grits_lab.runners.executor_config import check_reachable, cluster_address
@@ -237,11 +237,11 @@ def other_kernels_note(records_path: Path, done: list[dict[str, Any]]) -> str:
     from grits_lab.versions import cpu_kernels
 
     here = cpu_kernels()
-    other = {str(r["cpu_kernels"]) for r in done if _present(r.get("cpu_kernels"))} - {here}
-    if not other:
+    elsewhere = [label for r in done if _present(label := r.get(CPU_KERNELS)) and str(label) != here]
+    if not elsewhere:
         return ""
-    n = sum(1 for r in done if _present(r.get("cpu_kernels")) and str(r["cpu_kernels"]) != here)
-    return (f"warning: {n} records in {records_path} ran on CPU kernels `{sorted(other)[0]}`"
+    other = sorted(set(map(str, elsewhere)))
+    return (f"warning: {len(elsewhere)} records in {records_path} ran on CPU kernels `{other[0]}`"
             f"{f' (and {len(other) - 1} other labels)' if len(other) > 1 else ''}, this machine runs `{here}`: the episodes "
             "added now are other draws of their seeds, not repeats (docs/evaluation.md \"Other CPUs\")")
 
@@ -268,8 +268,9 @@ def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], diges
     from grits_lab.versions import cpu_kernels, cpu_model, git_commit, package_versions
 
     # what a file digest cannot tell: whether two checkpoints on other paths hold the same model
-    weights = {p: weights_digest(p) for by_key in paths.values() for p in by_key.values()}
-    trained = {p: trained_kernels(p) for by_key in paths.values() for p in by_key.values()}
+    # (the training kernels only where the checkpoint recorded them)
+    identity = {p: {key: value for key, value in checkpoint_identity(p).items() if value or key == "weights_sha256_16"}
+                for by_key in paths.values() for p in by_key.values()}
     return {
         "run_id": config.run_id,
         "protocol": PROTOCOL,
@@ -278,9 +279,7 @@ def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], diges
         "config fingerprint": config_fingerprint(config),
         "methods": {**(earlier or {}),
                     **{m: {"description": method_spec(m, config).description,
-                           "checkpoints": {k: {"path": p, "sha256_16": digests[p], "weights_sha256_16": weights[p],
-                                               **({"trained on cpu kernels": trained[p]} if trained[p] else {})}
-                                           for k, p in paths[m].items()},
+                           "checkpoints": {k: {"path": p, "sha256_16": digests[p], **identity[p]} for k, p in paths[m].items()},
                            "rho_s": list(guidance_columns(m, config))} for m in config.methods}},
         "guidance": config_to_dict(config.guidance),
         "posthoc": config_to_dict(config.posthoc),

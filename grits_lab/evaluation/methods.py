@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from grits_lab.errors import ConfigError, StorageError
+from grits_lab.records import CPU_KERNELS
 
 if TYPE_CHECKING:  # annotations only
     from grits_lab.evaluation.evaluation_config import CheckpointPaths, EvaluationConfig
@@ -88,11 +89,18 @@ def weights_digest(path: str | Path) -> str | None:
     every torch tensor and NumPy array, by its place in the file, dtype and shape), leaving out the
     training state and everything else (paths, configs, history). Two files from the same training
     on other paths have the same weights digest and different file digests. None for a directory."""
+    return checkpoint_identity(path)["weights_sha256_16"]
+
+
+def checkpoint_identity(path: str | Path) -> dict[str, str | None]:
+    """What a file digest cannot tell, from one load of the checkpoint: `weights_sha256_16`
+    (`weights_digest`) and `trained on cpu kernels` (its `cpu_kernels`, grits_lab/versions.py; None
+    when written before it was recorded). Both None for a directory."""
     import torch
 
     path = Path(path)
     if path.is_dir():
-        return None
+        return {"weights_sha256_16": None, "trained on cpu kernels": None}
     checkpoint = torch.load(path, map_location="cpu", weights_only=False)
     digest = hashlib.sha256()
 
@@ -111,19 +119,8 @@ def weights_digest(path: str | Path) -> str | None:
                 visit(item, f"{where}[{i}]")
 
     visit(checkpoint, "")
-    return digest.hexdigest()[:16]
-
-
-def trained_kernels(path: str | Path) -> str | None:
-    """The CPU kernels a checkpoint was trained on (its `cpu_kernels`, grits_lab/versions.py), or None
-    for a directory or a checkpoint written before it was recorded."""
-    import torch
-
-    path = Path(path)
-    if path.is_dir():
-        return None
-    kernels = torch.load(path, map_location="cpu", weights_only=False).get("cpu_kernels")
-    return str(kernels) if kernels else None
+    kernels = checkpoint.get(CPU_KERNELS)
+    return {"weights_sha256_16": digest.hexdigest()[:16], "trained on cpu kernels": str(kernels) if kernels else None}
 
 
 def file_digest(path: str | Path) -> str:

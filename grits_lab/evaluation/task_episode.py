@@ -26,9 +26,9 @@ from grits_lab.evaluation.controllers import ObsHistory, is_still
 from grits_lab.evaluation.episode_scene import EpisodeScene
 from grits_lab.evaluation.transfer import Obstacle, choose_transfer, locate_bowl
 from grits_lab.geometry import cubic_pose_path
-from grits_lab.records import LOAD_ACCOUNT
-from grits_lab.versions import cpu_kernels
+from grits_lab.records import CPU_KERNELS, LOAD_ACCOUNT
 from grits_lab.sim.env import matrix_to_pose9
+from grits_lab.versions import cpu_kernels
 
 if TYPE_CHECKING:  # annotations only: no import cost, no cycle
     from grits_lab.evaluation.evaluation_config import EvaluationConfig, TransferSettings
@@ -351,7 +351,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         "scoop_time_s": scoop_time,
         "scoop_action_offset_m": float(config.scoop.action_offset),
         "scoop_action_offset_draw": int(config.scoop.action_offset_draw) if config.scoop.action_offset else 0,
-        "cpu_kernels": cpu_kernels(),
+        CPU_KERNELS: cpu_kernels(),
         **summarize_guidance(scoop["diagnostics"]),
     }
     transferred, spilled_total, transfer_time, final = 0, int(m["spilled"]), 0.0, m

@@ -28,6 +28,7 @@ from grits_lab.errors import ConfigError, StorageError
 from grits_lab.io import ensure_writable_dir, exclusive_directory, write_text_atomic
 from grits_lab.policies.control import RolloutSettings, RolloutsFactory, rollout_episodes
 from grits_lab.policies.diffusion.demo_windows import DemoWindowDataset, dataset_fingerprint, list_demo_episodes, split_demo_episodes
+from grits_lab.records import CPU_KERNELS
 from grits_lab.training import (
     EMA, MetricLogger, load_checkpoint, require_finite_loss, resolve_device, save_checkpoint, set_torch_threads,
     warmup_cosine,
@@ -209,7 +210,7 @@ def _train(
             return
         state = {
             "protocol": PROTOCOL,  # the task protocol of the code that trained it (docs/protocol.md)
-            "cpu_kernels": cpu_kernels(),  # what trained it: weights trained on other kernels differ (docs/evaluation.md)
+            CPU_KERNELS: cpu_kernels(),  # what trained it: weights trained on other kernels differ (docs/evaluation.md)
             "policy": policy.policy_state(),  # type: ignore[operator]
             "ema": ema.state_dict() if ema is not None else None,
             "optimizer": optimizer.state_dict(),

@@ -21,10 +21,10 @@ import numpy as np
 import pandas as pd
 
 from grits_lab.errors import InputError, StorageError
+from grits_lab.records import CPU_KERNELS
 
 # Record columns that measure time or name the machine: they differ between a run and its replay.
-KERNELS = "cpu_kernels"  # grits_lab/versions.py `cpu_kernels`
-NOT_COMPARED = frozenset({"wall_time_s", "scoop_time_s", "transfer_time_s", "plan_time_mean_s", "plan_time_max_s", KERNELS})
+NOT_COMPARED = frozenset({"wall_time_s", "scoop_time_s", "transfer_time_s", "plan_time_mean_s", "plan_time_max_s", CPU_KERNELS})
 
 
 @dataclass
@@ -308,11 +308,11 @@ def replay_episode(run_dir: str | Path, *, method: str, food: str, level: str, t
                   and (k not in record or (_plain(record[k]) is None and _plain(v) is not None))}
     compared = sorted(k for k in replayed if k in record and k not in NOT_COMPARED and k not in unrecorded)
     mismatches = {k: (record[k], replayed[k]) for k in compared if not _equal(record[k], replayed[k])}
-    recorded_kernels = record.get(KERNELS)
+    recorded_kernels = record.get(CPU_KERNELS)
     result = ReplayResult(method, food, str(level), int(trial), int(record["seed"]), rho, s, compared, mismatches,
                           replayed=replayed, unrecorded=unrecorded,
                           recorded_kernels=None if _plain(recorded_kernels) is None else str(recorded_kernels),
-                          replayed_kernels=replayed.get(KERNELS))
+                          replayed_kernels=replayed.get(CPU_KERNELS))
     if video is not None:
         result.video = str(write_video(video, played.frames, fps=config.sim.control_hz / played._every))
         result.frames = len(played.frames)

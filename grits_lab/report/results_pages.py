@@ -208,10 +208,10 @@ def stages_block(root: Path, name: str, here: Path) -> str:
 def provenance_block(root: Path, name: str, here: Path) -> str:
     """Protocol, commits, machine, dates, wall time, checkpoints and episodes per method, as bullets."""
     p = _provenance(root, name)
-    packages = p.get("machine", {}).get("packages", {})
+    machine = p.get("machine", {})
+    packages = machine.get("packages", {})
     shown = ", ".join(f"{k} {packages[k]}" for k in ("python", "torch", "numpy", "pybullet") if k in packages)
     records_commit = p.get("records' code commit")
-    machine = p.get("machine", {})
     kernels = machine.get("cpu kernels (episodes)", {})
     cpu = (f"; CPU {machine['cpu']}" if machine.get("cpu") else "") + (
         "; CPU kernels " + ", ".join(f"`{k}` ({n} episode{'' if n == 1 else 's'})" for k, n in kernels.items()) if kernels else "")

@@ -21,6 +21,7 @@ import pandas as pd
 from grits_lab.errors import InputError
 from grits_lab.io import write_text_atomic
 from grits_lab.markdown import markdown_table
+from grits_lab.records import CPU_KERNELS
 from grits_lab.report.outcome_ceiling import CEILING_OUTCOMES, repeatability
 from grits_lab.report.run_records import load_run
 from grits_lab.report.spill_tables import (delivered_share, has_attribution, lifted_episodes, spilled_after_scoop,
@@ -31,7 +32,6 @@ from grits_lab.report.vocabulary import method_display
 PAIR_KEYS = ("method", "food", "level", "trial")
 OFFSET_COLUMN = "scoop_action_offset_m"  # `scoop.action_offset` of the run (docs/evaluation.md, "Outcome sensitivity")
 DRAW_COLUMN = "scoop_action_offset_draw"  # `scoop.action_offset_draw`: which seeded directions
-KERNELS_COLUMN = "cpu_kernels"  # the CPU kernels an episode ran on (grits_lab/versions.py `cpu_kernels`)
 COMPARISON_FILE = "comparison.csv"
 PAIRED_METHODS_FILE = "paired.csv"
 PAIR_REFERENCE = "dp"  # the unguided policy every guided variant is compared with
@@ -118,11 +118,10 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame, *, ceiling: bool = F
     are left out (`errors` counts them). The AUROC-ceiling columns come when the runs differ by a nudge
     (offset or draw) or every pair ran on other CPU kernels, or with `ceiling` (the caller declares the
     runs two draws of one chance that the records do not name; `ceiling_declared`)."""
-    # records from before the offset column ran without one; both sides hold it, so the merge suffixes it
-    before, after = (f if OFFSET_COLUMN in f.columns else f.assign(**{OFFSET_COLUMN: 0.0}) for f in (before, after))
-    before, after = (f if DRAW_COLUMN in f.columns else f.assign(**{DRAW_COLUMN: 0}) for f in (before, after))
-    # and records from before the kernels column do not say what they ran on
-    before, after = (f if KERNELS_COLUMN in f.columns else f.assign(**{KERNELS_COLUMN: None}) for f in (before, after))
+    # records from before these columns ran without an offset and do not name their kernels; both sides
+    # hold every column, so the merge suffixes it
+    missing = {OFFSET_COLUMN: 0.0, DRAW_COLUMN: 0, CPU_KERNELS: None}
+    before, after = (f.assign(**{c: v for c, v in missing.items() if c not in f.columns}) for f in (before, after))
     both = paired_episodes(before, after)
     rows = []
     for method in dict.fromkeys(both["method"]):
@@ -137,9 +136,9 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame, *, ceiling: bool = F
         for side in ("before", "after"):
             row[f"action_offset_{side}_m"] = float(pairs[f"{OFFSET_COLUMN}_{side}"].fillna(0.0).max()) if len(pairs) else 0.0
             row[f"action_offset_draw_{side}"] = int(pairs[f"{DRAW_COLUMN}_{side}"].fillna(0).max()) if len(pairs) else 0
-            labels = pairs[f"{KERNELS_COLUMN}_{side}"].dropna().astype(str)
+            labels = pairs[f"{CPU_KERNELS}_{side}"].dropna().astype(str)
             row[f"cpu_kernels_{side}"] = labels.mode().iloc[0] if len(labels) else ""
-        kb, ka = pairs[f"{KERNELS_COLUMN}_before"], pairs[f"{KERNELS_COLUMN}_after"]
+        kb, ka = pairs[f"{CPU_KERNELS}_before"], pairs[f"{CPU_KERNELS}_after"]
         row["kernels_differ"] = int((kb.notna() & ka.notna() & (kb.astype(str) != ka.astype(str))).sum())
         for outcome in PAIRED_OUTCOMES:
             a, b = pairs[f"{outcome}_before"].astype(bool), pairs[f"{outcome}_after"].astype(bool)

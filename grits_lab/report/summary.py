@@ -29,7 +29,7 @@ import pandas as pd
 
 from grits_lab.intervals import rate
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
-from grits_lab.records import OUTCOME_COLUMNS
+from grits_lab.records import CPU_KERNELS, OUTCOME_COLUMNS
 from grits_lab.report.run_compare import PAIRED_METHODS_FILE, compare_methods
 from grits_lab.report.run_records import RunData
 from grits_lab.report.spill_tables import (AFTER_SCOOP, DELIVERED_SHARE, delivered_share, has_attribution,
@@ -129,8 +129,8 @@ def _machine(runs: dict[str, Any], episodes: pd.DataFrame) -> dict[str, Any]:
     machine: dict[str, Any] = {"host": runs.get("host")}
     if runs.get("cpu"):
         machine["cpu"] = runs["cpu"]
-    if "cpu_kernels" in episodes and episodes["cpu_kernels"].notna().any():
-        counts = episodes["cpu_kernels"].dropna().astype(str).value_counts()
+    if CPU_KERNELS in episodes and episodes[CPU_KERNELS].notna().any():
+        counts = episodes[CPU_KERNELS].dropna().astype(str).value_counts()
         machine["cpu kernels (episodes)"] = {str(k): int(v) for k, v in sorted(counts.items())}
     machine["packages"] = runs.get("packages", {})
     return machine

@@ -18,6 +18,7 @@ from grits_lab.config import config_from_dict, config_to_dict
 from grits_lab.data.format import RETIRED_CHUNK_KEY, refuse_retired_chunk_key
 from grits_lab.data.normalize import ActionNormalizer
 from grits_lab.errors import ConfigError, StorageError
+from grits_lab.records import CPU_KERNELS
 from grits_lab.spillage.predictor_config import PredictorConfig
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
 from grits_lab.training.checkpoints import load_checkpoint, save_checkpoint
@@ -59,7 +60,7 @@ def save_predictor(path: str | Path, *, config: PredictorConfig, model: Spillage
     payload = {
         "format": CHECKPOINT_FORMAT,
         "protocol": PROTOCOL,  # the task protocol of the code that trained it (docs/protocol.md)
-        "cpu_kernels": cpu_kernels(),  # what trained it: weights trained on other kernels differ (docs/evaluation.md)
+        CPU_KERNELS: cpu_kernels(),  # what trained it: weights trained on other kernels differ (docs/evaluation.md)
         "config": config_to_dict(config),
         "model": model.state_dict(),
         "action_normalizer": action_normalizer.state_dict(),
