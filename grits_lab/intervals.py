@@ -1,4 +1,5 @@
-"""Rates with Wilson score intervals, the only statistics the report computes from episode outcomes.
+"""Rates with Wilson score intervals, and the exact sign test on paired episodes: the statistics
+computed from episode outcomes.
 
 The Wilson interval is used instead of the normal approximation because evaluation cells are
 small (5 trials per food and level) and rates are often 0 or 1, where the normal interval
@@ -72,3 +73,14 @@ def format_percent(value: float | None, missing: str = "—") -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return missing
     return f"{percent_digits(value)}%"
+
+
+def sign_test_p(only_before: int, only_after: int) -> float:
+    """Exact two-sided sign test on the discordant pairs (McNemar's exact test): the probability,
+    under no change (each discordant pair equally likely either way), of a split at least as
+    uneven. 1.0 without discordant pairs."""
+    n, k = only_before + only_after, min(only_before, only_after)
+    if n == 0:
+        return 1.0
+    tail = sum(math.comb(n, i) for i in range(k + 1)) / 2.0**n
+    return min(1.0, 2.0 * tail)

@@ -48,6 +48,8 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _print_summary(summary: dict, out_dir) -> None:
+    from grits_lab.tune.reference import paired_line
+
     def describe(m: dict | None) -> str:
         if m is None:
             return "not evaluated yet"
@@ -58,6 +60,12 @@ def _print_summary(summary: dict, out_dir) -> None:
     print(f"trials: {summary['states']}")
     print(f"best      {describe(summary['best'])}  [{summary['best_rule']}]")
     print(f"defaults  {describe(summary['defaults'])}")
+    for method, ref in summary.get("reference", {}).items():
+        print(f"reference {method}: success={ref['success_rate']:.3f} spillage={ref['spillage_rate']:.3f} "
+              f"scoop_failure={ref['scoop_failure_rate']:.3f} ({ref['n_episodes']} episodes)")
+        best = next((row for row in ref["front"] if summary["best"] and row["trial"] == summary["best"]["trial"]), None)
+        if best is not None:
+            print(f"  best {paired_line(best, method)}")
     for note in summary["notes"]:
         print(note)
     print(f"outputs in {out_dir}: {', '.join(summary['files'])}")

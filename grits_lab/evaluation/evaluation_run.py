@@ -372,7 +372,17 @@ def evaluate_guidance(config: EvaluationConfig, keys: list[EpisodeKey], rho: flo
     gap = guidance_gap(method, config)
     if gap is not None:
         raise InputError(f"method {method!r} {gap}")
-    config = replace(config, run_id=run_id, guidance=replace(config.guidance, rho=float(rho), s=int(s)))
+    config = replace(config, guidance=replace(config.guidance, rho=float(rho), s=int(s)))
+    return evaluate_keys(config, keys, method, run_id=run_id, executor=executor, progress=progress, paths=paths, digests=digests)
+
+
+def evaluate_keys(config: EvaluationConfig, keys: list[EpisodeKey], method: str, run_id: str = "sweep",
+                  executor: Executor | None = None, progress: bool = False,
+                  paths: dict[str, str] | None = None, digests: dict[str, str] | None = None) -> pd.DataFrame:
+    """`method` of `config` as it is on `keys` -> one record per episode, nothing written to disk: a
+    sweep's trials (through `evaluate_guidance`) and its `reference` methods (unguided DP on the
+    validation episodes, say). `executor`, `paths` and `digests` as in `evaluate_guidance`."""
+    config = replace(config, run_id=run_id)
     specs = build_specs(config, keys, methods=[method], paths=None if paths is None else {method: paths}, digests=digests)
     own = executor is None
     executor = executor or make_executor(config.executor)

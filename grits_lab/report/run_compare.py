@@ -13,12 +13,12 @@ method (Diffusion Policy) on the episodes both ran, the report's "Paired with Di
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import pandas as pd
 
 from grits_lab.errors import InputError
+from grits_lab.intervals import sign_test_p
 from grits_lab.io import write_text_atomic
 from grits_lab.markdown import markdown_table
 from grits_lab.records import CPU_KERNELS
@@ -49,17 +49,6 @@ PAIRED_OUTCOMES = {
     "scoop_failure": "scoop failure",
     "lifted_food_delivered": "lifted food delivered",
 }
-
-
-def sign_test_p(only_before: int, only_after: int) -> float:
-    """Exact two-sided sign test on the discordant pairs (McNemar's exact test): the probability,
-    under no change (each discordant pair equally likely either way), of a split at least as
-    uneven. 1.0 without discordant pairs."""
-    n, k = only_before + only_after, min(only_before, only_after)
-    if n == 0:
-        return 1.0
-    tail = sum(math.comb(n, i) for i in range(k + 1)) / 2.0**n
-    return min(1.0, 2.0 * tail)
 
 
 def _episodes(run_dir: str | Path) -> pd.DataFrame:

@@ -29,8 +29,8 @@ import pandas as pd
 
 from grits_lab.errors import ConfigError, InputError
 from grits_lab.evaluation.evaluation_config import EvaluationConfig, load_evaluation_config
-from grits_lab.evaluation.methods import METHODS, check_method_checkpoints, guidance_gap, method_checkpoints
-from grits_lab.evaluation.evaluation_run import checkpoint_digests, evaluate_guidance
+from grits_lab.evaluation.methods import METHODS, check_method_checkpoints, guidance_gap, method_checkpoints, method_spec
+from grits_lab.evaluation.evaluation_run import checkpoint_digests, evaluate_guidance, evaluate_keys
 from grits_lab.runners import Executor, make_executor
 from grits_lab.runners.executor_config import check_reachable, cluster_address
 from grits_lab.tune.study_config import StudyConfig
@@ -59,17 +59,29 @@ class GritsEvaluator:
         self._method = ref.method
         self.label = self.label_for(ref.method)
         self._paths = method_checkpoints(ref.method, self._evaluation.checkpoints)
-        self._digests = checkpoint_digests({ref.method: self._paths})
+        self._reference_paths = {m: _checked_reference(self._evaluation, m) for m in config.reference}
+        self._digests = checkpoint_digests({ref.method: self._paths, **self._reference_paths})
         self._executor: Executor | None = None
 
     def __call__(self, rho: float, s: int, run_id: str) -> pd.DataFrame:
+        return self._on_pool(lambda executor: evaluate_guidance(
+            self._evaluation, self._keys, rho=rho, s=s, method=self._method, run_id=run_id,
+            executor=executor, paths=self._paths, digests=self._digests))
+
+    def reference(self, method: str, run_id: str) -> pd.DataFrame:
+        """One record per validation episode of reference `method` (one of the sweep's `reference`),
+        as the evaluation config has it, on the trials' pool."""
+        return self._on_pool(lambda executor: evaluate_keys(
+            self._evaluation, self._keys, method, run_id=run_id, executor=executor,
+            paths=self._reference_paths[method], digests=self._digests))
+
+    def _on_pool(self, run):
         if self._executor is None:
             self._executor = make_executor(self._evaluation.executor)
         try:
-            return evaluate_guidance(self._evaluation, self._keys, rho=rho, s=s, method=self._method, run_id=run_id,
-                                     executor=self._executor, paths=self._paths, digests=self._digests)
+            return run(self._executor)
         except BaseException:
-            self.close()  # episodes of this trial may still be in flight: the next trial gets a fresh pool
+            self.close()  # episodes of this run may still be in flight: the next run gets a fresh pool
             raise
 
     def close(self) -> None:
@@ -77,6 +89,19 @@ class GritsEvaluator:
         executor, self._executor = self._executor, None
         if executor is not None:
             executor.close()
+
+
+def _checked_reference(evaluation: EvaluationConfig, method: str) -> dict[str, str]:
+    """The checkpoints of reference `method`, checked before any study exists (ConfigError naming
+    `reference` for a method the evaluation config cannot run)."""
+    try:
+        method_spec(method, evaluation)
+    except KeyError:
+        raise ConfigError(f"`reference`: {method} is no method: neither built-in ({', '.join(METHODS)}) nor registered "
+                          "(`custom_methods` of the evaluation config, or a `grits_lab.methods` entry point)") from None
+    paths = method_checkpoints(method, evaluation.checkpoints)
+    check_method_checkpoints(method, paths)
+    return paths
 
 
 def _check_against_evaluation(evaluation: EvaluationConfig, method: str) -> None:

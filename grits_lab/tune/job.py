@@ -13,8 +13,9 @@ def run_sweep(config: StudyConfig, n_trials: int | None = None, storage: str | N
               report_only: bool = False, plots: bool = True, progress: bool = True) -> dict[str, Any]:
     """Run the study described by `config` to its trial budget and return the outputs' summary.
 
-    `n_trials` and `storage` override the config's values; with `report_only` no trial runs and the
-    tables, best.yaml and plots are rewritten from the storage.
+    `n_trials` and `storage` override the config's values; the methods of `config.reference` run
+    first where their records are not stored yet (grits_lab/tune/reference.py); with `report_only`
+    nothing runs and the tables, best.yaml and plots are rewritten from the storage and the records.
     """
     import optuna
 
@@ -23,6 +24,7 @@ def run_sweep(config: StudyConfig, n_trials: int | None = None, storage: str | N
     from grits_lab.tune.grits_binding import GritsEvaluator
     from grits_lab.tune.objective import make_evaluator
     from grits_lab.tune.outputs import write_outputs
+    from grits_lab.tune.reference import run_references
     from grits_lab.tune.storage import open_storage
     from grits_lab.tune.study import EVALUATOR_ATTR, open_study, run_trials
     from grits_lab.tune.synthetic import SyntheticEvaluator
@@ -50,6 +52,7 @@ def run_sweep(config: StudyConfig, n_trials: int | None = None, storage: str | N
               f"{len(config.episodes())} episodes per trial; study budget {config.n_trials} trials",
               file=sys.stderr)
         try:
+            run_references(config, evaluator, out_dir / "records")
             run_trials(config, study, storage_obj, evaluator, records_dir=out_dir / "records",
                        progress=progress,
                        after_trial=lambda st: write_outputs(st, config, out_dir, where, label, plots=False))

@@ -26,6 +26,10 @@ class EpisodeEvaluator(Protocol):
 
     def __call__(self, rho: float, s: int, run_id: str) -> pd.DataFrame: ...
 
+    def reference(self, method: str, run_id: str) -> pd.DataFrame:
+        """The validation episodes of a method the sweep is read against (`StudyConfig.reference`)."""
+        ...
+
     def close(self) -> None: ...
 
 

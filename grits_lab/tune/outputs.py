@@ -19,6 +19,8 @@ import yaml
 from optuna.trial import FrozenTrial, TrialState
 
 from grits_lab.io import save_parquet_atomic, write_json_atomic, write_text_atomic
+from grits_lab.tune.objective import summarize_records
+from grits_lab.tune.reference import REFERENCE_FILE, load_references, paired_line, reference_table
 from grits_lab.tune.study_config import StudyConfig
 from grits_lab.tune.study import (
     ENQUEUED_ATTR, ERROR_ATTR, REQUEUED_ATTR, RETRY_OF_ATTR, WORKER_ATTR,
@@ -132,10 +134,15 @@ def write_outputs(study: optuna.Study, config: StudyConfig, out_dir: Path, stora
     save_parquet_atomic(out_dir / "trials.parquet", frame)
     best, how = best_trial(study, config)
     defaults = default_trial(study, config)
+    references = load_references(config, out_dir / "records")
+    paired = reference_table(config, out_dir / "records", frame)
+    if not paired.empty:
+        write_text_atomic(out_dir / REFERENCE_FILE, paired.to_csv(index=False))
+    against = _reference_lines(references, paired)
     if best is not None:
-        write_text_atomic(out_dir / "best.yaml", _best_yaml(config, best, defaults, how, evaluator_label))
+        write_text_atomic(out_dir / "best.yaml", _best_yaml(config, best, defaults, how, evaluator_label, against))
     front = sorted(pareto_front(scored_trials(study)), key=lambda t: t.number)
-    _write_front(config, front, out_dir / "front", evaluator_label)
+    _write_front(config, front, out_dir / "front", evaluator_label, against)
     summary = {
         "study_name": config.study_name,
         "storage": storage_description,
@@ -148,24 +155,48 @@ def write_outputs(study: optuna.Study, config: StudyConfig, out_dir: Path, stora
         "best_rule": how,
         "defaults": _metrics(defaults),
         "pareto_front": [_metrics(t) for t in front],
+        "reference": {method: _reference_summary(records, paired[paired["reference"] == method] if len(paired) else paired,
+                                                 {t.number for t in front})
+                      for method, records in references.items()},
         "dashboard": f"optuna-dashboard {storage_description}",
-        "notes": [],
+        "notes": [f"reference {m}: no stored records yet (they run before the next trial)"
+                  for m in config.reference if m not in references],
     }
     if plots:
-        summary["notes"].append(plot_tradeoff(study, config, out_dir / "pareto.png", evaluator_label))
+        summary["notes"].append(plot_tradeoff(study, config, out_dir / "pareto.png", evaluator_label, references))
         summary["notes"].append(plot_importance(study, config, out_dir / "importance.png"))
     summary["notes"] = [n for n in summary["notes"] if n]
     # Only what this call wrote: a plot skipped now, or left from an earlier run, is not named.
-    summary["files"] = [name for name in ("trials.csv", "trials.parquet", "best.yaml", "front", "pareto.png", "importance.png")
+    summary["files"] = [name for name in ("trials.csv", "trials.parquet", "best.yaml", "front", REFERENCE_FILE,
+                                          "pareto.png", "importance.png")
                         if (out_dir / name).exists() and (out_dir / name).stat().st_mtime >= started - 1.0] + ["summary.json"]
     write_json_atomic(out_dir / "summary.json", summary)
     return summary
 
 
-def _rates_line(t: FrozenTrial) -> str:
-    a = t.user_attrs
+def _rates_line(t: FrozenTrial | dict) -> str:
+    """The rates of a trial (its attributes) or of a reference (`TrialMetrics.as_attrs`)."""
+    a = t.user_attrs if isinstance(t, FrozenTrial) else t
     return (f"success {a['success_rate']:.3f}, spillage {a['spillage_rate']:.3f}, "
             f"scoop failure {a['scoop_failure_rate']:.3f} over {a['n_episodes']} episodes")
+
+
+def _reference_summary(records: pd.DataFrame, paired: pd.DataFrame, front: set[int]) -> dict:
+    """A reference's rates, and the front's trials paired with it (`reference.paired_counts`)."""
+    rows = paired[paired["trial"].isin(front)] if len(paired) else paired
+    return {**summarize_records(records).as_attrs(),
+            "front": [{k: (v.item() if hasattr(v, "item") else v) for k, v in row.items() if k != "reference"}
+                      for row in rows.to_dict("records")]}
+
+
+def _reference_lines(references: dict[str, pd.DataFrame], paired: pd.DataFrame) -> dict[int | None, list[str]]:
+    """Comment lines for best.yaml and the front's files: under None each reference's rates, under a
+    trial's number that trial against each reference, episode by episode."""
+    lines: dict[int | None, list[str]] = {None: [f"# Reference {m} on the same episodes: {_rates_line(summarize_records(r).as_attrs())}."
+                                                 for m, r in references.items()]}
+    for row in paired.to_dict("records") if len(paired) else []:
+        lines.setdefault(int(row["trial"]), []).append(f"# This trial {paired_line(row, str(row['reference']))}.")
+    return lines
 
 
 def guidance_override(config: StudyConfig, trial: FrozenTrial) -> dict:
@@ -183,14 +214,16 @@ def _override_file(config: StudyConfig, header: list[str], trial: FrozenTrial) -
     return "\n".join([*header, usage]) + "\n" + body
 
 
-def _write_front(config: StudyConfig, front: list[FrozenTrial], folder: Path, label: str) -> None:
+def _write_front(config: StudyConfig, front: list[FrozenTrial], folder: Path, label: str,
+                 against: dict[int | None, list[str]]) -> None:
     """One override per Pareto-front trial, `front/trial_NNNNN.yaml`; files of trials no longer on it go."""
     keep = set()
     for t in front:
         name = f"trial_{t.number:05d}.yaml"
         keep.add(name)
         header = [f"# Pareto-front trial {t.number} of sweep `{config.study_name}` (maximize success, minimize spillage).",
-                  f"# Evaluator: {label}.", f"# This trial: {_rates_line(t)}."]
+                  f"# Evaluator: {label}.", f"# This trial: {_rates_line(t)}.", *against.get(t.number, []),
+                  *against.get(None, [])]
         write_text_atomic(folder / name, _override_file(config, header, t))
     if folder.is_dir():
         for stale in folder.glob("trial_*.yaml"):
@@ -198,20 +231,25 @@ def _write_front(config: StudyConfig, front: list[FrozenTrial], folder: Path, la
                 stale.unlink()
 
 
-def _best_yaml(config: StudyConfig, best: FrozenTrial, defaults: FrozenTrial | None, how: str, label: str) -> str:
+def _best_yaml(config: StudyConfig, best: FrozenTrial, defaults: FrozenTrial | None, how: str, label: str,
+               against: dict[int | None, list[str]]) -> str:
     header = [
         f"# Best guidance of sweep `{config.study_name}`: trial {best.number} ({how}).",
         f"# Evaluator: {label}.",
         f"# This trial: {_rates_line(best)}.",
+        *against.get(best.number, []),
     ]
     if defaults is not None:
         header.append(f"# First enqueued point rho={defaults.params['rho']:g} s={defaults.params['s']} "
                       f"(trial {defaults.number}): {_rates_line(defaults)}.")
+    header += against.get(None, [])
     return _override_file(config, header, best)
 
 
-def plot_tradeoff(study: optuna.Study, config: StudyConfig, path: Path, label: str) -> str:
-    """Success vs spillage of every completed trial, Pareto front joined, defaults and best marked."""
+def plot_tradeoff(study: optuna.Study, config: StudyConfig, path: Path, label: str,
+                  references: dict[str, pd.DataFrame] | None = None) -> str:
+    """Success vs spillage of every completed trial, Pareto front joined, defaults, best and the
+    reference methods (`reference.load_references`) marked."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -238,6 +276,11 @@ def plot_tradeoff(study: optuna.Study, config: StudyConfig, path: Path, label: s
     if best is not None:
         ax.scatter([best.user_attrs["spillage_rate"]], [best.user_attrs["success_rate"]], marker="o",
                    s=200, facecolors="none", edgecolors="tab:red", linewidths=1.5, label=f"best (trial {best.number})")
+    for i, (method, records) in enumerate((references or {}).items()):
+        m = summarize_records(records)
+        spill.append(m.spillage_rate)  # the axis shows it too
+        ax.scatter([m.spillage_rate], [m.success_rate], marker="P", s=160, color=f"C{7 + i}", edgecolors="k",
+                   linewidths=0.8, label=f"reference {method} (same episodes)", zorder=5)
     if config.objective.max_spillage is not None:
         ax.axvline(config.objective.max_spillage, color="gray", linestyle="--", label="spillage limit")
     ax.set_xlabel("spillage rate (lower is better)")

@@ -211,6 +211,11 @@ class StudyConfig:
     # A running trial writes a heartbeat this often; one silent for stale_after_s is taken as dead.
     heartbeat_s: float = 20.0
     stale_after_s: float = 120.0
+    # Methods run once, as the evaluation config has them, on the same validation episodes (e.g.
+    # [dp]: unguided Diffusion Policy), so each trial is read against them episode by episode
+    # (grits_lab/tune/reference.py). Not part of the study's identity: adding one to a running
+    # study keeps its trials.
+    reference: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         require(bool(_NAME_RE.match(self.study_name)), "study_name", self.study_name,
@@ -227,6 +232,10 @@ class StudyConfig:
         if self.evaluator == "grits":
             require(bool(self.evaluation.config), "evaluation.config", self.evaluation.config,
                     "the path of an evaluation config when `evaluator: grits`")
+        require(len(set(self.reference)) == len(self.reference), "reference", self.reference, "without repeats")
+        if self.evaluator == "grits":
+            require(self.evaluation.method not in self.reference, "reference", self.reference,
+                    f"free of the tuned method `{self.evaluation.method}` (its trials are the sweep)")
         require(self.heartbeat_s > 0, "heartbeat_s", self.heartbeat_s, "> 0")
         require(self.stale_after_s > 2 * self.heartbeat_s, "stale_after_s", self.stale_after_s,
                 f"more than twice heartbeat_s = {self.heartbeat_s}")

@@ -77,5 +77,10 @@ class SyntheticEvaluator:
             })
         return pd.DataFrame(rows)
 
+    def reference(self, method: str, run_id: str) -> pd.DataFrame:
+        """The stand-in without guidance (rho = 0), labelled `method`: as unguided as it gets."""
+        records = self(0.0, 0, run_id)  # rho = 0: no guidance at any s
+        return records.assign(method=method, rho=float("nan"), s=-1)
+
     def close(self) -> None:
         pass

@@ -7,7 +7,8 @@ import pytest
 
 from grits_lab.cli import main
 from grits_lab.errors import InputError
-from grits_lab.report.run_compare import compare_runs, comparison_markdown, paired_episodes, sign_test_p, with_paired_outcomes
+from grits_lab.intervals import sign_test_p
+from grits_lab.report.run_compare import compare_runs, comparison_markdown, paired_episodes, with_paired_outcomes
 from grits_lab.report.run_records import normalize_records
 from grits_lab.sim.spill_metrics import attribution_columns
 from tests.report.synthetic_records import episode

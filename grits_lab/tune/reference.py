@@ -1,0 +1,137 @@
+"""A sweep's reference methods: run once on the validation episodes, every trial read against them.
+
+A front of (rho, s) says which guidance settings beat each other, not whether any beats the
+policy without guidance. A sweep file's `reference: [dp]` runs unguided Diffusion Policy (or any
+method the evaluation config can run, as that config has it) once on the same validation
+episodes, the same seeds, and keeps its records beside the trials' as
+`records/reference_<method>.parquet`. The outputs then give each trial's episodes paired with the
+reference's (`reference.csv`, the `reference` block of summary.json, the plot's marker): per
+outcome, the count in each, the episodes only one of them had, and the exact sign test on those.
+
+The reference runs before the first trial of a sweep process. A stored reference that covers the
+validation episodes is kept, so resuming never runs it again; one that does not is run again.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+import pandas as pd
+
+from grits_lab.errors import InputError
+from grits_lab.intervals import sign_test_p
+from grits_lab.io import save_parquet_atomic
+from grits_lab.tune.objective import EpisodeEvaluator, check_records, summarize_records
+from grits_lab.tune.study_config import StudyConfig
+
+REFERENCE_PREFIX = "reference_"
+REFERENCE_FILE = "reference.csv"
+# The record outcomes a trial is paired on: the sweep's objectives and the scoop failures behind them.
+PAIRED_OUTCOMES = ("task_success", "spillage", "scoop_failure")
+PAIR_KEYS = ("food", "level", "trial", "seed")
+
+
+def reference_path(records_dir: Path, method: str) -> Path:
+    """Where the records of reference `method` are kept: `records_dir/reference_<method>.parquet`."""
+    return Path(records_dir) / f"{REFERENCE_PREFIX}{method}.parquet"
+
+
+def run_references(config: StudyConfig, evaluator: EpisodeEvaluator, records_dir: Path,
+                   log: Callable[[str], None] | None = None) -> list[str]:
+    """Run each method of `config.reference` whose stored records do not cover the validation
+    episodes; return the methods run here. InputError when the evaluator returns other episodes."""
+    log = log or (lambda text: print(text, file=sys.stderr, flush=True))
+    episodes = config.episodes()
+    ran = []
+    for method in config.reference:
+        path = reference_path(records_dir, method)
+        if path.is_file():
+            try:
+                check_records(pd.read_parquet(path), episodes)
+                continue
+            except InputError as exc:
+                log(f"reference {method}: {path} is not this sweep's validation set ({exc}); running it again")
+        start = time.perf_counter()
+        records = evaluator.reference(method, run_id=f"{config.study_name}/reference-{method}")
+        check_records(records, episodes)
+        save_parquet_atomic(path, records)
+        m = summarize_records(records)
+        log(f"reference {method}: success={m.success_rate:.2f} spillage={m.spillage_rate:.2f} "
+            f"({m.n_episodes} episodes, {time.perf_counter() - start:.1f} s)")
+        ran.append(method)
+    return ran
+
+
+def load_references(config: StudyConfig, records_dir: Path) -> dict[str, pd.DataFrame]:
+    """{method: records} of the configured references whose stored records cover the validation episodes."""
+    episodes = config.episodes()
+    found = {}
+    for method in config.reference:
+        path = reference_path(records_dir, method)
+        if not path.is_file():
+            continue
+        records = pd.read_parquet(path)
+        try:
+            check_records(records, episodes)
+        except InputError:
+            continue
+        found[method] = records
+    return found
+
+
+def _outcomes(records: pd.DataFrame) -> pd.DataFrame:
+    """Per episode (indexed by PAIR_KEYS), the paired outcomes as the sweep scores them
+    (`summarize_records`): an episode with an error is no success and a scoop failure."""
+    errors = records["error"].fillna("").astype(str).str.len() > 0
+    frame = pd.DataFrame({
+        "task_success": records["task_success"].astype(bool) & ~errors,
+        "spillage": records["spillage"].astype(bool),
+        "scoop_failure": records["scoop_failure"].astype(bool) | errors,
+    })
+    frame.index = pd.MultiIndex.from_frame(records[list(PAIR_KEYS)].astype({"trial": "int64", "seed": "int64"}))
+    return frame
+
+
+def paired_counts(reference: pd.DataFrame, trial: pd.DataFrame) -> dict[str, int | float]:
+    """One trial's records against a reference's on the episodes both ran (same food, level, trial
+    and seed): `paired`, and per outcome of PAIRED_OUTCOMES `<outcome>_reference`, `_trial` (episodes
+    with it), `_only_reference`, `_only_trial` and `_p` (exact two-sided sign test on those two)."""
+    ref, own = _outcomes(reference), _outcomes(trial)
+    both = ref.add_suffix("_reference").join(own.add_suffix("_trial"), how="inner")
+    row: dict[str, int | float] = {"paired": int(len(both))}
+    for outcome in PAIRED_OUTCOMES:
+        a, b = both[f"{outcome}_reference"], both[f"{outcome}_trial"]
+        row.update({f"{outcome}_reference": int(a.sum()), f"{outcome}_trial": int(b.sum()),
+                    f"{outcome}_only_reference": int((a & ~b).sum()), f"{outcome}_only_trial": int((b & ~a).sum())})
+        row[f"{outcome}_p"] = sign_test_p(int(row[f"{outcome}_only_reference"]), int(row[f"{outcome}_only_trial"]))
+    return row
+
+
+def reference_table(config: StudyConfig, records_dir: Path, trials: pd.DataFrame) -> pd.DataFrame:
+    """One row per (reference method, completed trial with stored records): the trial's number, rho,
+    s and whether it is on the Pareto front (from `trials`, the trials table), then `paired_counts`.
+    Empty when no reference is stored."""
+    references = load_references(config, records_dir)
+    rows = []
+    if not references or trials.empty:
+        return pd.DataFrame(rows)
+    done = trials[trials["state"] == "COMPLETE"]
+    for method, reference in references.items():
+        for _, t in done.iterrows():
+            path = Path(records_dir) / f"trial_{int(t['number']):05d}.parquet"
+            if not path.is_file():
+                continue
+            rows.append({"reference": method, "trial": int(t["number"]), "rho": float(t["rho"]), "s": int(t["s"]),
+                         "pareto_front": bool(t["pareto_front"]), **paired_counts(reference, pd.read_parquet(path))})
+    return pd.DataFrame(rows)
+
+
+def paired_line(row: pd.Series | dict, reference: str) -> str:
+    """"task success 6 -> 9 (-1 +4, p 0.38); spillage ..." for one row of `reference_table`."""
+    cells = [f"{outcome.replace('_', ' ')} {row[f'{outcome}_reference']} -> {row[f'{outcome}_trial']} "
+             f"(-{row[f'{outcome}_only_reference']} +{row[f'{outcome}_only_trial']}, p {row[f'{outcome}_p']:.2g})"
+             for outcome in PAIRED_OUTCOMES]
+    return f"against {reference} on {row['paired']} paired episodes: " + "; ".join(cells)

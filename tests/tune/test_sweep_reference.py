@@ -1,0 +1,150 @@
+"""A sweep's `reference` methods run once on the validation episodes, and every trial is paired with them."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pandas as pd
+import pytest
+import yaml
+
+from grits_lab.errors import ConfigError
+from grits_lab.tune import reference as reference_module
+from grits_lab.tune.job import run_sweep
+from grits_lab.tune.reference import paired_counts, reference_path
+from grits_lab.tune.study_config import load_study_config
+from tests.evaluation.conftest import models  # noqa: F401  (session fixture: tiny trained checkpoints)
+from tests.tune.test_sweep_pool import grits_sweep
+
+
+def _records(rows):
+    """Records of four episodes: (task_success, spillage, scoop_failure, error) per episode."""
+    return pd.DataFrame([{"food": "soybeans", "level": "low", "trial": i, "seed": 100 + i, "task_success": ts,
+                          "spillage": sp, "scoop_failure": sf, "error": err}
+                         for i, (ts, sp, sf, err) in enumerate(rows)])
+
+
+def test_paired_counts_count_each_outcome_episode_by_episode_with_the_sign_test():
+    reference = _records([(False, True, False, ""), (False, True, False, ""), (True, False, False, ""), (False, True, False, "")])
+    trial = _records([(True, False, False, ""), (True, False, False, ""), (True, False, False, ""), (False, False, False, "crash")])
+    row = paired_counts(reference, trial)
+    assert row["paired"] == 4
+    assert (row["task_success_reference"], row["task_success_trial"]) == (1, 3)
+    assert (row["task_success_only_reference"], row["task_success_only_trial"]) == (0, 2)
+    assert row["task_success_p"] == pytest.approx(0.5)  # 2 of 2 discordant one way: 2 * (1/4)
+    assert (row["spillage_reference"], row["spillage_trial"], row["spillage_only_reference"]) == (3, 0, 3)
+    assert row["spillage_p"] == pytest.approx(0.25)
+    # the errored episode is a scoop failure and no success, as the sweep scores it
+    assert (row["scoop_failure_reference"], row["scoop_failure_trial"], row["scoop_failure_only_trial"]) == (0, 1, 1)
+
+
+def test_episodes_pair_by_their_seed_not_by_their_row_order():
+    reference = _records([(True, False, False, ""), (False, True, False, "")])
+    trial = _records([(True, False, False, ""), (False, True, False, "")]).iloc[::-1]
+    row = paired_counts(reference, trial)
+    assert row["task_success_only_reference"] == row["task_success_only_trial"] == 0
+    other = trial.assign(seed=trial["seed"] + 1)  # other seeds: nothing pairs
+    assert paired_counts(reference, other)["paired"] == 0
+
+
+def test_the_reference_runs_once_before_the_trials_and_each_trial_is_paired_with_it(sweep_file, monkeypatch):
+    config = load_study_config(sweep_file(reference=["dp"], n_trials=3, objective={"mode": "multi"}))
+    runs = []
+    real = reference_module.run_references
+
+    def counted(config, evaluator, records_dir, log=None):
+        ran = real(config, evaluator, records_dir, log=lambda text: None)
+        runs.append(ran)
+        return ran
+
+    monkeypatch.setattr(reference_module, "run_references", counted)
+    summary = run_sweep(config, progress=False, plots=False)
+    records_dir = config.study_dir / "records"
+    reference = pd.read_parquet(reference_path(records_dir, "dp"))
+    assert runs == [["dp"]]
+    assert set(reference["method"]) == {"dp"} and reference["rho"].isna().all()
+    assert sorted(reference["seed"]) == sorted(e.seed for e in config.episodes())
+
+    # every completed trial is paired with it, with the counts its records give
+    table = pd.read_csv(config.study_dir / "reference.csv")
+    assert sorted(table["trial"]) == [0, 1, 2] and (table["paired"] == len(config.episodes())).all()
+    for _, row in table.iterrows():
+        trial = pd.read_parquet(records_dir / f"trial_{row['trial']:05d}.parquet")
+        assert row["task_success_trial"] == int(trial["task_success"].sum())
+        assert row["spillage_reference"] == int(reference["spillage"].sum())
+        both = trial.merge(reference, on=["food", "level", "trial", "seed"], suffixes=("", "_ref"))
+        assert row["spillage_only_reference"] == int((both["spillage_ref"] & ~both["spillage"]).sum())
+    block = summary["reference"]["dp"]
+    assert block["n_episodes"] == len(config.episodes())
+    assert block["spillage_rate"] == pytest.approx(reference["spillage"].mean())
+    assert {r["trial"] for r in block["front"]} == {t["trial"] for t in summary["pareto_front"]}
+    best_yaml = (config.study_dir / "best.yaml").read_text()
+    assert f"against dp on {len(config.episodes())} paired episodes" in best_yaml
+    assert yaml.safe_load(best_yaml)["guidance"]["rho"] == pytest.approx(summary["best"]["rho"])
+
+    # resumed with a larger budget: the stored reference is kept, not run again
+    summary = run_sweep(config, n_trials=4, progress=False, plots=False)
+    assert runs == [["dp"], []] and summary["states"] == {"COMPLETE": 4}
+    assert json.loads((config.study_dir / "summary.json").read_text())["reference"]["dp"]["n_episodes"] == len(config.episodes())
+
+
+def test_a_reference_added_to_a_running_study_keeps_its_trials_and_report_only_runs_nothing(sweep_file):
+    plain = load_study_config(sweep_file(n_trials=2))
+    run_sweep(plain, progress=False, plots=False)
+    with_reference = load_study_config(sweep_file(n_trials=2, reference=["dp"]))
+    assert with_reference.identity() == plain.identity()
+    summary = run_sweep(with_reference, report_only=True, plots=False)
+    assert summary["reference"] == {} and any("reference dp: no stored records" in n for n in summary["notes"])
+    assert not reference_path(with_reference.study_dir / "records", "dp").exists()
+    summary = run_sweep(with_reference, progress=False, plots=False)
+    assert summary["states"] == {"COMPLETE": 2}  # no trial ran again
+    assert summary["reference"]["dp"]["n_episodes"] == len(with_reference.episodes())
+
+
+def test_a_stored_reference_of_other_episodes_is_run_again(sweep_file):
+    config = load_study_config(sweep_file(n_trials=1, reference=["dp"]))
+    run_sweep(config, progress=False, plots=False)
+    path = reference_path(config.study_dir / "records", "dp")
+    pd.read_parquet(path).iloc[:-1].to_parquet(path)  # one episode short
+    run_sweep(config, progress=False, plots=False)
+    assert len(pd.read_parquet(path)) == len(config.episodes())
+
+
+@pytest.mark.parametrize("overrides, key", [
+    ({"reference": ["dp", "dp"]}, "reference"),
+])
+def test_a_bad_reference_fails_on_load_naming_the_key(sweep_file, overrides, key):
+    with pytest.raises(ConfigError) as info:
+        load_study_config(sweep_file(**overrides))
+    assert f"`{key}`" in str(info.value) and "\n" not in str(info.value)
+
+
+def test_the_tuned_method_or_an_unknown_one_is_refused_as_reference_before_any_study_exists(sweep_file, models, tmp_path):  # noqa: F811
+    config, _ = grits_sweep(sweep_file, models, tmp_path, {"backend": "serial"})
+    data = yaml.safe_load((tmp_path / f"{config.study_name}.yaml").read_text())
+    path = tmp_path / "ref.yaml"
+    path.write_text(yaml.safe_dump({**data, "reference": ["grits"]}))
+    with pytest.raises(ConfigError, match="`reference`.*tuned method `grits`"):
+        load_study_config(path)
+    path.write_text(yaml.safe_dump({**data, "reference": ["dp_plus"]}))
+    with pytest.raises(ConfigError, match="`reference`: dp_plus is no method"):
+        run_sweep(load_study_config(path), progress=False, plots=False)
+    assert not config.study_dir.exists()
+
+
+def test_a_grits_sweep_runs_unguided_dp_on_its_validation_episodes(sweep_file, models, tmp_path):  # noqa: F811
+    config, _ = grits_sweep(sweep_file, models, tmp_path, {"backend": "serial"}, n_trials=1)
+    data = yaml.safe_load((tmp_path / f"{config.study_name}.yaml").read_text())
+    path = tmp_path / "ref.yaml"
+    path.write_text(yaml.safe_dump({**data, "reference": ["dp"]}))
+    config = load_study_config(path)
+    summary = run_sweep(config, progress=False, plots=False)
+    records_dir = config.study_dir / "records"
+    reference = pd.read_parquet(reference_path(records_dir, "dp"))
+    trial = pd.read_parquet(records_dir / "trial_00000.parquet")
+    assert list(reference["method"].unique()) == ["dp"] and (reference["error"] == "").all()
+    assert reference["rho"].isna().all() and (reference["s"] == -1).all()  # no guidance
+    assert sorted(reference["seed"]) == sorted(trial["seed"])
+    assert reference["checkpoint_policy"].tolist() == trial["checkpoint_policy"].tolist()
+    assert summary["reference"]["dp"]["n_episodes"] == 2 and not math.isnan(summary["reference"]["dp"]["success_rate"])
