@@ -40,7 +40,7 @@ from grits_lab.report.render import (
     write_csv,
 )
 from grits_lab.report.spill_tables import delivery_table, load_loss_figure, spill_attribution_table
-from grits_lab.report.sweep import summarize_sweep, sweep_tables
+from grits_lab.report.sweep import summarize_sweep, sweep_reference_table, sweep_tables
 from grits_lab.report.tables import (
     ReportTable,
     all_variants,
@@ -188,6 +188,9 @@ def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Sec
         summary = summarize_sweep(run.trials, run.best_params)
         best_file = str(run.best_params_file) if run.best_params_file else None
         items = [_table(t, out, result) for t in sweep_tables(summary, run.best_params, best_file)]
+        against = sweep_reference_table(run.sweep_reference)
+        if against is not None:
+            items.append(_table(against, out, result))
         if run.best_params_text:
             # The file as written: its comments say how the best trial was chosen and how it compares.
             items.append(Preformatted(f"Best parameters file: {best_file}", run.best_params_text, "yaml"))

@@ -178,7 +178,7 @@ def _held_outcomes(table: pd.DataFrame) -> list[str]:
     return [o for o in PAIRED_OUTCOMES if f"{o}_before" in table.columns]
 
 
-def _paired_cell(row: pd.Series, outcome: str) -> str:
+def paired_cell(row: pd.Series, outcome: str) -> str:
     """"a → b (−only_before +only_after, p P)" for one outcome of one row of a paired table."""
     return (f"{row[f'{outcome}_before']} → {row[f'{outcome}_after']} "
             f"(−{row[f'{outcome}_only_before']} +{row[f'{outcome}_only_after']}, p {row[f'{outcome}_p']:.2g})")
@@ -190,7 +190,7 @@ def paired_methods_markdown(table: pd.DataFrame) -> tuple[list[str], list[list[s
     reference = method_display(str(table["reference"].iloc[0]))
     outcomes = _held_outcomes(table)
     head = ["Method", "Paired episodes"] + [PAIRED_OUTCOMES[o] for o in outcomes]
-    rows = [[method_display(row["method"]), str(row["paired"])] + [_paired_cell(row, o) for o in outcomes]
+    rows = [[method_display(row["method"]), str(row["paired"])] + [paired_cell(row, o) for o in outcomes]
             for _, row in table.iterrows()]
     caption = (f"Episodes with each outcome, {reference} → the method, on the episodes both ran (same food, level, trial "
                f"and seed); (−a +b): episodes that had it only with {reference}, only with the method; p: exact two-sided "
@@ -214,7 +214,7 @@ def comparison_markdown(table: pd.DataFrame) -> str:
     outcomes = _held_outcomes(table)
     head = ["Method", "Paired", "Scoop equal"] + [PAIRED_OUTCOMES[o] for o in outcomes]
     rows = [[method_display(row["method"]), str(row["paired"]), f"{row['scoop_equal']}/{row['paired']}"]
-            + [_paired_cell(row, o) for o in outcomes] for _, row in table.iterrows()]
+            + [paired_cell(row, o) for o in outcomes] for _, row in table.iterrows()]
     lines = [markdown_table(head, rows), ""]
     lines.append(f"Episodes with each outcome, {before} → {after}, on the same seeds; (−a +b): episodes that had it only "
                  "in the first run, only in the second; p: exact two-sided sign test on those. Scoop equal: scooped, "

@@ -11,8 +11,9 @@ What the report expects in RUN_DIR (written by `grits-lab evaluate` and `grits-l
 * optional run metadata: `config.yaml` (and any other *.yaml at the top level) and
   `provenance.json`, shown verbatim in the report's provenance section.
 * optional sweep outputs anywhere up to two folders below RUN_DIR: a trials table
-  `trials.parquet` (preferred) or `trials.csv`, and a best-parameters YAML (`best.yaml`, `best_params.yaml`
-  or `best*.yaml`) beside it.
+  `trials.parquet` (preferred) or `trials.csv`, and beside it a best-parameters YAML (`best.yaml`,
+  `best_params.yaml` or `best*.yaml`) and the trials paired with the sweep's reference methods
+  (`reference.csv`).
 
 Records are read, never re-scored: the only change made is that an episode with a non-empty
 `error` has its task success set to False (it counts as a failure and is shown as a count).
@@ -38,6 +39,7 @@ REQUIRED_COLUMNS = ("method", "food", "level", *OUTCOME_COLUMNS)
 FLAG_COLUMNS = (*OUTCOME_COLUMNS, "spilled_before_scoop")
 RECORD_SUBDIRS = ("records", "episodes")
 TRIALS_FILES = ("trials.parquet", "trials.csv")
+SWEEP_REFERENCE_FILE = "reference.csv"  # beside the trials table
 NOT_RECORD_FILES = {"trials.parquet", "index.parquet"}
 PAGE_RECORDS_FILE = "episodes.csv"  # the records a summary page keeps (grits_lab/report/summary.py)
 MAX_CONFIG_CHARS = 20_000
@@ -60,6 +62,8 @@ class RunData:
     best_params: dict[str, Any] | None = None
     best_params_file: Path | None = None
     best_params_text: str = ""
+    # A sweep's trials paired with its reference methods (`reference.csv`, grits_lab/tune/reference.py).
+    sweep_reference: pd.DataFrame | None = None
     configs: dict[str, str] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
 
@@ -103,6 +107,8 @@ def load_run(run_dir: str | Path, exclude: str | Path | None = None, also: Seque
         if data.best_params_file is not None:
             data.best_params = _read_yaml(data.best_params_file)
             data.best_params_text = data.best_params_file.read_text(errors="replace")
+        if (data.trials_file.parent / SWEEP_REFERENCE_FILE).is_file():
+            data.sweep_reference = _read_table(data.trials_file.parent / SWEEP_REFERENCE_FILE)
     if not frames and data.trials is None:
         detail = f"; ignored: {'; '.join(data.ignored_files)}" if data.ignored_files else ""
         raise InputError(

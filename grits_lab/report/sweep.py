@@ -17,8 +17,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import pandas as pd
+from grits_lab.report.run_compare import PAIRED_OUTCOMES, paired_cell
 from grits_lab.report.tables import ReportTable
-from grits_lab.report.vocabulary import MISSING
+from grits_lab.report.vocabulary import MISSING, method_display
 
 PARAMETERS = ("rho", "s")
 # The paper's trade-off: at most one success column (maximized) and one spillage column (minimized).
@@ -171,3 +172,29 @@ def _flatten(mapping: dict[str, Any], prefix: str = "") -> dict[str, Any]:
         else:
             flat[name] = value if not isinstance(value, list) else str(value)
     return flat
+
+
+# reference.csv's column suffixes -> the paired tables' (run_compare), so one formatter writes both.
+_REFERENCE_SUFFIXES = {"_only_reference": "_only_before", "_only_trial": "_only_after",
+                       "_reference": "_before", "_trial": "_after"}
+
+
+def sweep_reference_table(reference: pd.DataFrame | None) -> ReportTable | None:
+    """The Pareto-front trials paired with each of the sweep's reference methods (`reference.csv` of
+    grits_lab/tune/reference.py), or None without one."""
+    if reference is None or reference.empty or "pareto_front" not in reference.columns:
+        return None
+    front = reference[reference["pareto_front"].astype(str).str.lower() == "true"].sort_values(["reference", "trial"])
+    outcomes = [c.removesuffix("_p") for c in reference.columns if c.endswith("_p")]
+    renamed = front.rename(columns=lambda c: next((c.removesuffix(k) + v for k, v in _REFERENCE_SUFFIXES.items()
+                                                   if c.endswith(k) and c.removesuffix(k) in outcomes), c))
+    head = ["Reference", "Trial", "rho", "s", "Paired"] + [PAIRED_OUTCOMES.get(o, o.replace("_", " ")) for o in outcomes]
+    rows = [[method_display(str(r["reference"])), str(r["trial"]), _fmt(float(r["rho"])), str(r["s"]), str(r["paired"])]
+            + [paired_cell(r, o) for o in outcomes] for _, r in renamed.iterrows()]
+    return ReportTable(
+        "sweep_reference", "Sweep: the Pareto front against the reference, episode by episode",
+        "Episodes with each outcome, the reference → the trial, on the validation episodes both ran (same food, level, "
+        "trial and seed); (−a +b): episodes that had it only with the reference, only with the trial; p: exact two-sided "
+        "sign test (McNemar's exact test) on those. An episode with an error is no success and a scoop failure.",
+        pd.DataFrame(rows, columns=head), front.reset_index(drop=True),
+    )

@@ -148,3 +148,20 @@ def test_a_grits_sweep_runs_unguided_dp_on_its_validation_episodes(sweep_file, m
     assert sorted(reference["seed"]) == sorted(trial["seed"])
     assert reference["checkpoint_policy"].tolist() == trial["checkpoint_policy"].tolist()
     assert summary["reference"]["dp"]["n_episodes"] == 2 and not math.isnan(summary["reference"]["dp"]["success_rate"])
+
+
+def test_the_report_of_a_sweep_pairs_its_front_with_the_reference(sweep_file, tmp_path):
+    from grits_lab.report import build_report
+
+    config = load_study_config(sweep_file(reference=["dp"], n_trials=4, objective={"mode": "multi"}))
+    summary = run_sweep(config, progress=False, plots=False)
+    build_report(config.study_dir, tmp_path / "report")
+    markdown = (tmp_path / "report" / "report.md").read_text()
+    section = markdown.split("### Sweep: the Pareto front against the reference, episode by episode", 1)[1].split("###", 1)[0]
+    rows = [line for line in section.splitlines() if line.startswith("| Diffusion Policy")]
+    assert len(rows) == len(summary["pareto_front"])
+    for row, paired in zip(rows, sorted(summary["reference"]["dp"]["front"], key=lambda r: r["trial"])):
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        assert int(cells[1]) == paired["trial"] and int(cells[4]) == paired["paired"]
+        assert cells[5].startswith(f"{paired['task_success_reference']} → {paired['task_success_trial']} "
+                                   f"(−{paired['task_success_only_reference']} +{paired['task_success_only_trial']},")
