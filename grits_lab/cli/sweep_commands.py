@@ -63,9 +63,8 @@ def _print_summary(summary: dict, out_dir) -> None:
     for method, ref in summary.get("reference", {}).items():
         print(f"reference {method}: success={ref['success_rate']:.3f} spillage={ref['spillage_rate']:.3f} "
               f"scoop_failure={ref['scoop_failure_rate']:.3f} ({ref['n_episodes']} episodes)")
-        best = next((row for row in ref["front"] if summary["best"] and row["trial"] == summary["best"]["trial"]), None)
-        if best is not None:
-            print(f"  best {paired_line(best, method)}")
+        if ref["best"] is not None:
+            print(f"  best {paired_line(ref['best'], method)}")
     for note in summary["notes"]:
         print(note)
     print(f"outputs in {out_dir}: {', '.join(summary['files'])}")

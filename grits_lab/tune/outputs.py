@@ -134,10 +134,12 @@ def write_outputs(study: optuna.Study, config: StudyConfig, out_dir: Path, stora
     save_parquet_atomic(out_dir / "trials.parquet", frame)
     best, how = best_trial(study, config)
     defaults = default_trial(study, config)
-    references = load_references(config, out_dir / "records")
-    paired = reference_table(config, out_dir / "records", frame)
+    references, unstored = load_references(config, out_dir / "records")
+    paired = reference_table(references, out_dir / "records", frame)
     if not paired.empty:
         write_text_atomic(out_dir / REFERENCE_FILE, paired.to_csv(index=False))
+    else:  # a table left from an earlier reference must not be read as this one's
+        (out_dir / REFERENCE_FILE).unlink(missing_ok=True)
     against = _reference_lines(references, paired)
     if best is not None:
         write_text_atomic(out_dir / "best.yaml", _best_yaml(config, best, defaults, how, evaluator_label, against))
@@ -156,11 +158,11 @@ def write_outputs(study: optuna.Study, config: StudyConfig, out_dir: Path, stora
         "defaults": _metrics(defaults),
         "pareto_front": [_metrics(t) for t in front],
         "reference": {method: _reference_summary(records, paired[paired["reference"] == method] if len(paired) else paired,
-                                                 {t.number for t in front})
+                                                 {t.number for t in front}, best)
                       for method, records in references.items()},
         "dashboard": f"optuna-dashboard {storage_description}",
-        "notes": [f"reference {m}: no stored records yet (they run before the next trial)"
-                  for m in config.reference if m not in references],
+        "notes": [f"reference {m}: {why} (the next sweep command runs it before its first trial)"
+                  for m, why in unstored.items()],
     }
     if plots:
         summary["notes"].append(plot_tradeoff(study, config, out_dir / "pareto.png", evaluator_label, references))
@@ -181,12 +183,17 @@ def _rates_line(t: FrozenTrial | dict) -> str:
             f"scoop failure {a['scoop_failure_rate']:.3f} over {a['n_episodes']} episodes")
 
 
-def _reference_summary(records: pd.DataFrame, paired: pd.DataFrame, front: set[int]) -> dict:
-    """A reference's rates, and the front's trials paired with it (`reference.paired_counts`)."""
-    rows = paired[paired["trial"].isin(front)] if len(paired) else paired
+def _reference_summary(records: pd.DataFrame, paired: pd.DataFrame, front: set[int], best: FrozenTrial | None) -> dict:
+    """A reference's rates, the front's trials and the best trial paired with it (`reference.paired_counts`;
+    `best` is None before a trial completes or when its records are unreadable)."""
+    def plain(row: dict) -> dict:
+        return {k: (v.item() if hasattr(v, "item") else v) for k, v in row.items() if k != "reference"}
+
+    rows = paired.to_dict("records") if len(paired) else []
+    chosen = [plain(r) for r in rows if best is not None and r["trial"] == best.number]
     return {**summarize_records(records).as_attrs(),
-            "front": [{k: (v.item() if hasattr(v, "item") else v) for k, v in row.items() if k != "reference"}
-                      for row in rows.to_dict("records")]}
+            "best": chosen[0] if chosen else None,
+            "front": [plain(r) for r in rows if r["trial"] in front]}
 
 
 def _reference_lines(references: dict[str, pd.DataFrame], paired: pd.DataFrame) -> dict[int | None, list[str]]:

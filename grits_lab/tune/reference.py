@@ -8,8 +8,10 @@ episodes, the same seeds, and keeps its records beside the trials' as
 reference's (`reference.csv`, the `reference` block of summary.json, the plot's marker): per
 outcome, the count in each, the episodes only one of them had, and the exact sign test on those.
 
-The reference runs before the first trial of a sweep process. A stored reference that covers the
-validation episodes is kept, so resuming never runs it again; one that does not is run again.
+The reference runs before the first trial of a sweep process that finds no stored records of it
+(each process of a shared study that starts before the first has stored them runs it too). A
+stored reference that covers the validation episodes is kept, so resuming never runs it again;
+one that does not, or an unreadable file, is run again.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from typing import Callable
 
 import pandas as pd
 
-from grits_lab.errors import InputError
+from grits_lab.errors import GritsError, InputError
 from grits_lab.intervals import sign_test_p
 from grits_lab.io import save_parquet_atomic
 from grits_lab.tune.objective import EpisodeEvaluator, check_records, summarize_records
@@ -39,24 +41,48 @@ def reference_path(records_dir: Path, method: str) -> Path:
     return Path(records_dir) / f"{REFERENCE_PREFIX}{method}.parquet"
 
 
+def stored_reference(path: Path, episodes: list) -> tuple[pd.DataFrame | None, str]:
+    """(records, "") when `path` holds records of exactly `episodes`; otherwise (None, why not):
+    no file, an unreadable one, or one of other episodes."""
+    if not path.is_file():
+        return None, "no stored records yet"
+    try:
+        records = pd.read_parquet(path)
+    except Exception as exc:  # a damaged or foreign file: pyarrow's errors have no common base
+        return None, f"{path} is not readable ({type(exc).__name__})"
+    try:
+        check_records(records, episodes)
+    except InputError as exc:
+        return None, f"{path} is not this sweep's validation set ({exc})"
+    return records, ""
+
+
 def run_references(config: StudyConfig, evaluator: EpisodeEvaluator, records_dir: Path,
                    log: Callable[[str], None] | None = None) -> list[str]:
     """Run each method of `config.reference` whose stored records do not cover the validation
-    episodes; return the methods run here. InputError when the evaluator returns other episodes."""
+    episodes (`stored_reference`); return the methods run here. A reference whose run raises is
+    logged in one line and left for the next sweep command, and the trials go on; a GritsError
+    (bad input) is raised."""
     log = log or (lambda text: print(text, file=sys.stderr, flush=True))
     episodes = config.episodes()
     ran = []
     for method in config.reference:
         path = reference_path(records_dir, method)
-        if path.is_file():
-            try:
-                check_records(pd.read_parquet(path), episodes)
-                continue
-            except InputError as exc:
-                log(f"reference {method}: {path} is not this sweep's validation set ({exc}); running it again")
+        stored, why = stored_reference(path, episodes)
+        if stored is not None:
+            continue
+        if path.exists():
+            log(f"reference {method}: {why}; running it again")
         start = time.perf_counter()
-        records = evaluator.reference(method, run_id=f"{config.study_name}/reference-{method}")
-        check_records(records, episodes)
+        try:
+            records = evaluator.reference(method, run_id=f"{config.study_name}/reference-{method}")
+            check_records(records, episodes)
+        except GritsError:
+            raise
+        except Exception as exc:  # like a crashed trial: the study goes on
+            log(f"reference {method} failed: {type(exc).__name__}: {exc}; the trials go on, and the next sweep "
+                "command runs it again")
+            continue
         save_parquet_atomic(path, records)
         m = summarize_records(records)
         log(f"reference {method}: success={m.success_rate:.2f} spillage={m.spillage_rate:.2f} "
@@ -65,21 +91,18 @@ def run_references(config: StudyConfig, evaluator: EpisodeEvaluator, records_dir
     return ran
 
 
-def load_references(config: StudyConfig, records_dir: Path) -> dict[str, pd.DataFrame]:
-    """{method: records} of the configured references whose stored records cover the validation episodes."""
+def load_references(config: StudyConfig, records_dir: Path) -> tuple[dict[str, pd.DataFrame], dict[str, str]]:
+    """({method: records} of the configured references whose stored records cover the validation
+    episodes, {method: why not} of the others)."""
     episodes = config.episodes()
-    found = {}
+    found, missing = {}, {}
     for method in config.reference:
-        path = reference_path(records_dir, method)
-        if not path.is_file():
-            continue
-        records = pd.read_parquet(path)
-        try:
-            check_records(records, episodes)
-        except InputError:
-            continue
-        found[method] = records
-    return found
+        records, why = stored_reference(reference_path(records_dir, method), episodes)
+        if records is None:
+            missing[method] = why
+        else:
+            found[method] = records
+    return found, missing
 
 
 def _outcomes(records: pd.DataFrame) -> pd.DataFrame:
@@ -110,23 +133,24 @@ def paired_counts(reference: pd.DataFrame, trial: pd.DataFrame) -> dict[str, int
     return row
 
 
-def reference_table(config: StudyConfig, records_dir: Path, trials: pd.DataFrame) -> pd.DataFrame:
-    """One row per (reference method, completed trial with stored records): the trial's number, rho,
-    s and whether it is on the Pareto front (from `trials`, the trials table), then `paired_counts`.
-    Empty when no reference is stored."""
-    references = load_references(config, records_dir)
+def reference_table(references: dict[str, pd.DataFrame], records_dir: Path, trials: pd.DataFrame) -> pd.DataFrame:
+    """One row per (reference method of `references`, the stored ones of `load_references`; completed
+    trial with readable records in `records_dir`): the trial's number, rho, s and whether it is on the
+    Pareto front (from `trials`, the trials table), then `paired_counts`. Empty without references."""
     rows = []
     if not references or trials.empty:
         return pd.DataFrame(rows)
     done = trials[trials["state"] == "COMPLETE"]
-    for method, reference in references.items():
-        for _, t in done.iterrows():
-            path = Path(records_dir) / f"trial_{int(t['number']):05d}.parquet"
-            if not path.is_file():
-                continue
+    for _, t in done.iterrows():
+        path = Path(records_dir) / f"trial_{int(t['number']):05d}.parquet"
+        try:
+            records = pd.read_parquet(path)
+        except Exception:  # missing or damaged: the trials table keeps its rates; nothing to pair
+            continue
+        for method, reference in references.items():
             rows.append({"reference": method, "trial": int(t["number"]), "rho": float(t["rho"]), "s": int(t["s"]),
-                         "pareto_front": bool(t["pareto_front"]), **paired_counts(reference, pd.read_parquet(path))})
-    return pd.DataFrame(rows)
+                         "pareto_front": bool(t["pareto_front"]), **paired_counts(reference, records)})
+    return pd.DataFrame(rows).sort_values(["reference", "trial"], kind="stable", ignore_index=True) if rows else pd.DataFrame()
 
 
 def paired_line(row: pd.Series | dict, reference: str) -> str:

@@ -232,6 +232,9 @@ class StudyConfig:
         if self.evaluator == "grits":
             require(bool(self.evaluation.config), "evaluation.config", self.evaluation.config,
                     "the path of an evaluation config when `evaluator: grits`")
+        for i, method in enumerate(self.reference):
+            require(isinstance(method, str) and bool(_NAME_RE.match(method)), f"reference[{i}]", method,
+                    "a method name: letters, digits, '_', '.', '-' (it names a records file)")
         require(len(set(self.reference)) == len(self.reference), "reference", self.reference, "without repeats")
         if self.evaluator == "grits":
             require(self.evaluation.method not in self.reference, "reference", self.reference,

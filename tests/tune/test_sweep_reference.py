@@ -76,6 +76,7 @@ def test_the_reference_runs_once_before_the_trials_and_each_trial_is_paired_with
         both = trial.merge(reference, on=["food", "level", "trial", "seed"], suffixes=("", "_ref"))
         assert row["spillage_only_reference"] == int((both["spillage_ref"] & ~both["spillage"]).sum())
     block = summary["reference"]["dp"]
+    assert block["best"]["trial"] == summary["best"]["trial"]
     assert block["n_episodes"] == len(config.episodes())
     assert block["spillage_rate"] == pytest.approx(reference["spillage"].mean())
     assert {r["trial"] for r in block["front"]} == {t["trial"] for t in summary["pareto_front"]}
@@ -95,7 +96,7 @@ def test_a_reference_added_to_a_running_study_keeps_its_trials_and_report_only_r
     with_reference = load_study_config(sweep_file(n_trials=2, reference=["dp"]))
     assert with_reference.identity() == plain.identity()
     summary = run_sweep(with_reference, report_only=True, plots=False)
-    assert summary["reference"] == {} and any("reference dp: no stored records" in n for n in summary["notes"])
+    assert summary["reference"] == {} and any("reference dp: no stored records yet" in n for n in summary["notes"])
     assert not reference_path(with_reference.study_dir / "records", "dp").exists()
     summary = run_sweep(with_reference, progress=False, plots=False)
     assert summary["states"] == {"COMPLETE": 2}  # no trial ran again
@@ -111,8 +112,44 @@ def test_a_stored_reference_of_other_episodes_is_run_again(sweep_file):
     assert len(pd.read_parquet(path)) == len(config.episodes())
 
 
+def test_a_damaged_reference_is_run_again_and_a_damaged_trial_record_is_left_out_of_the_pairing(sweep_file):
+    config = load_study_config(sweep_file(n_trials=2, reference=["dp"]))
+    run_sweep(config, progress=False, plots=False)
+    records_dir = config.study_dir / "records"
+    path = reference_path(records_dir, "dp")
+    path.write_text("not parquet")
+    (records_dir / "trial_00001.parquet").write_text("not parquet either")
+    summary = run_sweep(config, report_only=True, plots=False)
+    assert summary["reference"] == {} and any("dp" in n and "not readable" in n for n in summary["notes"])
+    assert not (config.study_dir / "reference.csv").exists()  # no pairing now: none left from before
+    summary = run_sweep(config, progress=False, plots=False)  # runs the reference again
+    assert len(pd.read_parquet(path)) == len(config.episodes())
+    assert sorted(pd.read_csv(config.study_dir / "reference.csv")["trial"]) == [0]  # trial 1's records are unreadable
+    assert summary["reference"]["dp"]["best"] is None or summary["reference"]["dp"]["best"]["trial"] == summary["best"]["trial"]
+
+
+def test_a_reference_that_raises_is_logged_in_one_line_and_the_trials_go_on(sweep_file, capsys, monkeypatch):
+    from grits_lab.tune.synthetic import SyntheticEvaluator
+
+    config = load_study_config(sweep_file(n_trials=2, reference=["dp"]))
+
+    def broken(self, method, run_id):
+        raise RuntimeError("simulator crashed")
+
+    monkeypatch.setattr(SyntheticEvaluator, "reference", broken)
+    summary = run_sweep(config, progress=False, plots=False)
+    assert summary["states"] == {"COMPLETE": 2} and summary["reference"] == {}
+    lines = [line for line in capsys.readouterr().err.splitlines() if "reference dp failed" in line]
+    assert len(lines) == 1 and "RuntimeError: simulator crashed" in lines[0]
+    assert not reference_path(config.study_dir / "records", "dp").exists()
+
+
 @pytest.mark.parametrize("overrides, key", [
     ({"reference": ["dp", "dp"]}, "reference"),
+    ({"reference": ["../x"]}, "reference[0]"),
+    ({"reference": ["dp", "a/b"]}, "reference[1]"),
+    ({"reference": [""]}, "reference[0]"),
+    ({"reference": ["dp "]}, "reference[0]"),
 ])
 def test_a_bad_reference_fails_on_load_naming_the_key(sweep_file, overrides, key):
     with pytest.raises(ConfigError) as info:
@@ -157,7 +194,7 @@ def test_the_report_of_a_sweep_pairs_its_front_with_the_reference(sweep_file, tm
     summary = run_sweep(config, progress=False, plots=False)
     build_report(config.study_dir, tmp_path / "report")
     markdown = (tmp_path / "report" / "report.md").read_text()
-    section = markdown.split("### Sweep: the Pareto front against the reference, episode by episode", 1)[1].split("###", 1)[0]
+    section = markdown.split("### Sweep: the success-spillage front against the reference, episode by episode", 1)[1].split("###", 1)[0]
     rows = [line for line in section.splitlines() if line.startswith("| Diffusion Policy")]
     assert len(rows) == len(summary["pareto_front"])
     for row, paired in zip(rows, sorted(summary["reference"]["dp"]["front"], key=lambda r: r["trial"])):
