@@ -8,7 +8,9 @@ A page holds generated blocks between two markers; everything outside them is ha
 
 KIND is one of BLOCKS: `outcomes`, `stages`, `provenance`, `headline` and `claims` read the
 summary files of docs/experiments/EXPERIMENT/ (grits_lab/report/summary.py); `comparison` reads
-the paired comparison `grits-lab compare-runs` writes there; `shift BEFORE..AFTER[+AFTER...]`
+the paired comparison `grits-lab compare-runs` writes there; `paired` every method against Diffusion
+Policy on the same episodes; `sweep_reference` a sweep's front against its reference methods
+(a sweep's summary: `grits-lab report results/sweeps/NAME --summary-to ...`); `shift BEFORE..AFTER[+AFTER...]`
 sets each method's outcomes in one summary beside another's (a protocol before and after a change,
 whose records need not exist any more); `index` lists every experiment folder. `grits-lab results
 check` (and tests/report/test_results_pages.py) fails when a page differs from what its summaries
@@ -32,7 +34,9 @@ from grits_lab.markdown import markdown_table
 from grits_lab.records import OUTCOME_COLUMNS
 from grits_lab.report.run_compare import COMPARISON_FILE, PAIRED_METHODS_FILE, comparison_markdown, paired_methods_markdown
 from grits_lab.report.spill_tables import CAUSE_NAMES, STAGE_NAMES
+from grits_lab.report.run_records import SWEEP_REFERENCE_FILE
 from grits_lab.report.summary import CLAIMS_FILE, PROVENANCE_FILE, STAGES_FILE, SUMMARY_FILE
+from grits_lab.report.sweep import sweep_reference_table
 from grits_lab.report.vocabulary import MAIN_METHODS, PAPER_RESULTS
 from grits_lab.sim.spill_metrics import SPILL_CAUSES, SPILL_STAGES
 
@@ -265,6 +269,17 @@ def paired_block(root: Path, name: str, here: Path) -> str:
     return f"{markdown_table(head, rows)}\n\n{caption} File: [{PAIRED_METHODS_FILE}]({_link(root, name, PAIRED_METHODS_FILE, here)})."
 
 
+def sweep_reference_block(root: Path, name: str, here: Path) -> str:
+    """A sweep's success-spillage front against its reference methods (unguided DP) on the same
+    validation episodes, as the summary holds it (reference.csv: grits_lab/tune/reference.py)."""
+    table = sweep_reference_table(pd.read_csv(_folder(root, name, needs=SWEEP_REFERENCE_FILE) / SWEEP_REFERENCE_FILE))
+    if table is None:
+        return f"{SWEEP_REFERENCE_FILE} holds no trial on the front."
+    shown = table.display
+    return (f"{markdown_table(list(shown.columns), shown.astype(str).values.tolist())}\n\n{table.caption} "
+            f"File: [{SWEEP_REFERENCE_FILE}]({_link(root, name, SWEEP_REFERENCE_FILE, here)}).")
+
+
 def shift_block(root: Path, name: str, here: Path) -> str:
     """`BEFORE..AFTER[+AFTER...]`: per method of BEFORE's summary that an AFTER summary holds (the first
     that does), each outcome of SHIFT_HEADERS as "k/n → k/n". Unpaired: the two summaries' episodes
@@ -320,6 +335,7 @@ BLOCKS: dict[str, Callable[[Path, str, Path], str]] = {
     "comparison": comparison_block,
     "paired": paired_block,
     "shift": shift_block,
+    "sweep_reference": sweep_reference_block,
     "index": index_block,
 }
 

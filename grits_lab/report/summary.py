@@ -6,6 +6,7 @@
     stage_cause.csv   one row per method, stage and cause: episodes with such a spill, particles
     claims.csv        the paper's claims beside these records (the report's claims table), when they hold its methods
     paired.csv        every method against Diffusion Policy on the episodes both ran (run_compare.compare_methods)
+    reference.csv     a sweep's trials against its reference methods on the same episodes (the sweep's own file)
     provenance.json   protocol, commits, machine, dates, wall time, checkpoint digests, episodes per method
     config.yaml       the run's config as it ran (RUN_DIR/config.yaml)
     episodes.csv      the episode records themselves, one row per episode (grits_lab/records.py), so that a
@@ -31,7 +32,7 @@ from grits_lab.intervals import rate
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
 from grits_lab.records import CPU_KERNELS, OUTCOME_COLUMNS
 from grits_lab.report.run_compare import PAIRED_METHODS_FILE, compare_methods
-from grits_lab.report.run_records import RunData
+from grits_lab.report.run_records import SWEEP_REFERENCE_FILE, RunData
 from grits_lab.report.spill_tables import (AFTER_SCOOP, DELIVERED_SHARE, delivered_share, has_attribution,
                                            lifted_episodes, spill_attribution_table, spilled_after_scoop,
                                            spilled_before_pour, spilled_in)
@@ -174,9 +175,10 @@ def summary_provenance(run: RunData, command: str) -> dict[str, Any]:
 
 
 def write_summary(run: RunData, out_dir: str | Path, command: str) -> list[Path]:
-    """Write summary.csv, stage_cause.csv, claims.csv, paired.csv, provenance.json and config.yaml into
-    `out_dir` (a claims.csv or paired.csv left by an earlier summary of other records is removed when
-    these hold none of the paper's methods, or no method to pair with Diffusion Policy)."""
+    """Write summary.csv, stage_cause.csv, claims.csv, paired.csv, reference.csv, provenance.json and
+    config.yaml into `out_dir` (a claims.csv, paired.csv or reference.csv left by an earlier summary of
+    other records is removed when these hold none of the paper's methods, no method to pair with
+    Diffusion Policy, or no sweep reference)."""
     from grits_lab.errors import InputError
 
     if run.episodes is None or run.episodes.empty:
@@ -189,10 +191,12 @@ def write_summary(run: RunData, out_dir: str | Path, command: str) -> list[Path]
         tables.append((CLAIMS_FILE, claims_table(run.episodes).display))
     if not (paired := compare_methods(run.episodes)).empty:
         tables.append((PAIRED_METHODS_FILE, paired))
+    if run.sweep_reference is not None and not run.sweep_reference.empty:
+        tables.append((SWEEP_REFERENCE_FILE, run.sweep_reference))
     for name, frame in tables:
         write_text_atomic(out / name, frame.to_csv(index=False, lineterminator="\n"))
         files.append(out / name)
-    for name in (CLAIMS_FILE, PAIRED_METHODS_FILE):
+    for name in (CLAIMS_FILE, PAIRED_METHODS_FILE, SWEEP_REFERENCE_FILE):
         if name not in dict(tables):
             (out / name).unlink(missing_ok=True)
     write_text_atomic(out / EPISODES_FILE, episodes_csv(run.episodes))

@@ -202,3 +202,22 @@ def test_the_report_of_a_sweep_pairs_its_front_with_the_reference(sweep_file, tm
         assert int(cells[1]) == paired["trial"] and int(cells[4]) == paired["paired"]
         assert cells[5].startswith(f"{paired['task_success_reference']} → {paired['task_success_trial']} "
                                    f"(−{paired['task_success_only_reference']} +{paired['task_success_only_trial']},")
+
+
+def test_a_sweeps_summary_page_renders_its_front_against_the_reference(sweep_file, tmp_path):
+    from grits_lab.report import load_run
+    from grits_lab.report.results_pages import render_page
+    from grits_lab.report.summary import write_summary
+
+    config = load_study_config(sweep_file(reference=["dp"], n_trials=3, objective={"mode": "multi"}))
+    summary = run_sweep(config, progress=False, plots=False)
+    page = tmp_path / "site" / "docs" / "experiments" / "sweep"
+    write_summary(load_run(config.study_dir), page, "grits-lab report STUDY --summary-to PAGE")
+    assert (page / "reference.csv").read_text() == (config.study_dir / "reference.csv").read_text()
+    text = render_page("<!-- generated: sweep_reference sweep -->\n<!-- end generated -->\n", page / "README.md", tmp_path / "site")
+    rows = [line for line in text.splitlines() if line.startswith("| Diffusion Policy")]
+    assert len(rows) == len(summary["pareto_front"]) and "File: [reference.csv](reference.csv)" in text
+    # a later summary of the same folder without a reference leaves no reference.csv behind
+    (config.study_dir / "reference.csv").unlink()
+    write_summary(load_run(config.study_dir), page, "again")
+    assert not (page / "reference.csv").exists()
