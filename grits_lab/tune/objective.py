@@ -64,15 +64,26 @@ def check_records(records: pd.DataFrame, episodes: list[EpisodeKey]) -> None:
         )
 
 
-def summarize_records(records: pd.DataFrame) -> TrialMetrics:
+def scored_outcomes(records: pd.DataFrame) -> pd.DataFrame:
+    """Per episode (records' index), the outcomes as the sweep scores them: `task_success`,
+    `spillage`, `scoop_failure`; an episode with an error is no success and a scoop failure."""
     errors = records["error"].fillna("").astype(str).str.len() > 0
-    success = records["task_success"].astype(bool) & ~errors
+    return pd.DataFrame({
+        "task_success": records["task_success"].astype(bool) & ~errors,
+        "spillage": records["spillage"].astype(bool),
+        "scoop_failure": records["scoop_failure"].astype(bool) | errors,
+        "error": errors,
+    })
+
+
+def summarize_records(records: pd.DataFrame) -> TrialMetrics:
+    scored = scored_outcomes(records)
     return TrialMetrics(
-        success_rate=float(success.mean()),
-        spillage_rate=float(records["spillage"].astype(bool).mean()),
-        scoop_failure_rate=float((records["scoop_failure"].astype(bool) | errors).mean()),
+        success_rate=float(scored["task_success"].mean()),
+        spillage_rate=float(scored["spillage"].mean()),
+        scoop_failure_rate=float(scored["scoop_failure"].mean()),
         n_episodes=int(len(records)),
-        n_errors=int(errors.sum()),
+        n_errors=int(scored["error"].sum()),
     )
 
 

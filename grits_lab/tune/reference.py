@@ -26,7 +26,8 @@ import pandas as pd
 from grits_lab.errors import GritsError, InputError
 from grits_lab.intervals import sign_test_p
 from grits_lab.io import save_parquet_atomic
-from grits_lab.tune.objective import EpisodeEvaluator, check_records, summarize_records
+from grits_lab.tune.objective import EpisodeEvaluator, check_records, scored_outcomes, summarize_records
+from grits_lab.tune.study import trial_records_path
 from grits_lab.tune.study_config import StudyConfig
 
 REFERENCE_PREFIX = "reference_"
@@ -106,14 +107,8 @@ def load_references(config: StudyConfig, records_dir: Path) -> tuple[dict[str, p
 
 
 def _outcomes(records: pd.DataFrame) -> pd.DataFrame:
-    """Per episode (indexed by PAIR_KEYS), the paired outcomes as the sweep scores them
-    (`summarize_records`): an episode with an error is no success and a scoop failure."""
-    errors = records["error"].fillna("").astype(str).str.len() > 0
-    frame = pd.DataFrame({
-        "task_success": records["task_success"].astype(bool) & ~errors,
-        "spillage": records["spillage"].astype(bool),
-        "scoop_failure": records["scoop_failure"].astype(bool) | errors,
-    })
+    """Per episode (indexed by PAIR_KEYS), the paired outcomes as the sweep scores them (`scored_outcomes`)."""
+    frame = scored_outcomes(records)[list(PAIRED_OUTCOMES)]
     frame.index = pd.MultiIndex.from_frame(records[list(PAIR_KEYS)].astype({"trial": "int64", "seed": "int64"}))
     return frame
 
@@ -142,9 +137,8 @@ def reference_table(references: dict[str, pd.DataFrame], records_dir: Path, tria
         return pd.DataFrame(rows)
     done = trials[trials["state"] == "COMPLETE"]
     for _, t in done.iterrows():
-        path = Path(records_dir) / f"trial_{int(t['number']):05d}.parquet"
         try:
-            records = pd.read_parquet(path)
+            records = pd.read_parquet(trial_records_path(records_dir, int(t["number"])))
         except Exception:  # missing or damaged: the trials table keeps its rates; nothing to pair
             continue
         for method, reference in references.items():

@@ -66,6 +66,11 @@ class WorkerIdentity:
         return cls(parts[0], int(parts[1]), parts[2])
 
 
+def trial_records_path(records_dir: Path, number: int) -> Path:
+    """Where trial `number`'s episode records are kept: `records_dir/trial_NNNNN.parquet`."""
+    return Path(records_dir) / f"trial_{number:05d}.parquet"
+
+
 def open_study(config: StudyConfig, storage: BaseStorage) -> optuna.Study:
     """Create the study (queueing the configured defaults first) or load it and check it matches.
 
@@ -268,7 +273,7 @@ def run_trials(
             metrics = summarize_records(records)
             values = objective_values(metrics, config.objective)
             if records_dir is not None:
-                save_parquet_atomic(records_dir / f"trial_{trial.number:05d}.parquet", records)
+                save_parquet_atomic(trial_records_path(records_dir, trial.number), records)
             try:
                 for key, value in metrics.as_attrs().items():
                     trial.set_user_attr(key, value)
