@@ -188,9 +188,10 @@ def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Sec
         summary = summarize_sweep(run.trials, run.best_params)
         best_file = str(run.best_params_file) if run.best_params_file else None
         items = [_table(t, out, result) for t in sweep_tables(summary, run.best_params, best_file)]
-        against = sweep_reference_table(run.sweep_reference)
-        if against is not None:
-            items.append(_table(against, out, result))
+        for every_trial in (False, True):
+            against = sweep_reference_table(run.sweep_reference, every_trial=every_trial)
+            if against is not None:
+                items.append(_table(against, out, result))
         if run.best_params_text:
             # The file as written: its comments say how the best trial was chosen and how it compares.
             items.append(Preformatted(f"Best parameters file: {best_file}", run.best_params_text, "yaml"))

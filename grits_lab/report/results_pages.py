@@ -9,8 +9,9 @@ A page holds generated blocks between two markers; everything outside them is ha
 KIND is one of BLOCKS: `outcomes`, `stages`, `provenance`, `headline` and `claims` read the
 summary files of docs/experiments/EXPERIMENT/ (grits_lab/report/summary.py); `comparison` reads
 the paired comparison `grits-lab compare-runs` writes there; `paired` every method against Diffusion
-Policy on the same episodes; `sweep_reference` a sweep's front against its reference methods
-(a sweep's summary: `grits-lab report results/sweeps/NAME --summary-to ...`); `shift BEFORE..AFTER[+AFTER...]`
+Policy on the same episodes; `sweep_reference` a sweep's front against its reference methods and
+`sweep_trials` every one of its trials (a sweep's summary: `grits-lab report results/sweeps/NAME
+--summary-to ...`); `shift BEFORE..AFTER[+AFTER...]`
 sets each method's outcomes in one summary beside another's (a protocol before and after a change,
 whose records need not exist any more); `index` lists every experiment folder. `grits-lab results
 check` (and tests/report/test_results_pages.py) fails when a page differs from what its summaries
@@ -23,6 +24,7 @@ import json
 import math
 import os
 import re
+from functools import partial
 from pathlib import Path
 from typing import Callable
 
@@ -219,9 +221,12 @@ def provenance_block(root: Path, name: str, here: Path) -> str:
     kernels = machine.get("cpu kernels (episodes)", {})
     cpu = (f"; CPU {machine['cpu']}" if machine.get("cpu") else "") + (
         "; CPU kernels " + ", ".join(f"`{k}` ({n} episode{'' if n == 1 else 's'})" for k, n in kernels.items()) if kernels else "")
+    started = p.get("run started (UTC)")
     lines = [
-        f"- Protocol: {', '.join(p.get('protocol', [])) or 'not recorded'}; records' code: `{records_commit}`.",
-        f"- Machine: host `{machine.get('host')}`{'; ' + shown if shown else ''}{cpu}; run started {p.get('run started (UTC)')} UTC.",
+        f"- Protocol: {', '.join(p.get('protocol', [])) or 'not recorded'}; records' code: "
+        + (f"`{records_commit}`." if records_commit else "not recorded."),
+        f"- Machine: host " + (f"`{machine['host']}`" if machine.get("host") else "not recorded")
+        + f"{'; ' + shown if shown else ''}{cpu}; run started " + (f"{started} UTC." if started else "not recorded."),
         f"- Episode wall time, summed: {_duration(p.get('episode wall time (s, summed)'))}.",
     ]
     for method in p.get("methods", {}).values():
@@ -269,12 +274,14 @@ def paired_block(root: Path, name: str, here: Path) -> str:
     return f"{markdown_table(head, rows)}\n\n{caption} File: [{PAIRED_METHODS_FILE}]({_link(root, name, PAIRED_METHODS_FILE, here)})."
 
 
-def sweep_reference_block(root: Path, name: str, here: Path) -> str:
-    """A sweep's success-spillage front against its reference methods (unguided DP) on the same
-    validation episodes, as the summary holds it (reference.csv: grits_lab/tune/reference.py)."""
-    table = sweep_reference_table(pd.read_csv(_folder(root, name, needs=SWEEP_REFERENCE_FILE) / SWEEP_REFERENCE_FILE))
+def sweep_reference_block(root: Path, name: str, here: Path, every_trial: bool = False) -> str:
+    """A sweep's success-spillage front (`every_trial`: every completed trial, by rho) against its
+    reference methods (unguided DP) on the same validation episodes, as the summary holds it
+    (reference.csv: grits_lab/tune/reference.py)."""
+    table = sweep_reference_table(pd.read_csv(_folder(root, name, needs=SWEEP_REFERENCE_FILE) / SWEEP_REFERENCE_FILE),
+                                  every_trial=every_trial)
     if table is None:
-        return f"{SWEEP_REFERENCE_FILE} holds no trial on the front."
+        return f"{SWEEP_REFERENCE_FILE} holds no trial" + ("." if every_trial else " on the front.")
     shown = table.display
     return (f"{markdown_table(list(shown.columns), shown.astype(str).values.tolist())}\n\n{table.caption} "
             f"File: [{SWEEP_REFERENCE_FILE}]({_link(root, name, SWEEP_REFERENCE_FILE, here)}).")
@@ -336,6 +343,7 @@ BLOCKS: dict[str, Callable[[Path, str, Path], str]] = {
     "paired": paired_block,
     "shift": shift_block,
     "sweep_reference": sweep_reference_block,
+    "sweep_trials": partial(sweep_reference_block, every_trial=True),
     "index": index_block,
 }
 

@@ -137,6 +137,15 @@ def _machine(runs: dict[str, Any], episodes: pd.DataFrame) -> dict[str, Any]:
     return machine
 
 
+def _sweep_started(trials: pd.DataFrame | None) -> str | None:
+    """A sweep's start: its earliest trial's `datetime_start` (trials.csv, grits_lab/tune/outputs.py), None
+    without one. A sweep keeps no provenance.json: its trials may run on several machines."""
+    if trials is None or "datetime_start" not in trials:
+        return None
+    started = pd.to_datetime(trials["datetime_start"], errors="coerce").dropna()
+    return started.min().strftime("%Y-%m-%d %H:%M:%S") if len(started) else None
+
+
 def summary_provenance(run: RunData, command: str) -> dict[str, Any]:
     """What produced the records (from the run's provenance.json and the records) and the summary."""
     episodes = run.episodes
@@ -163,7 +172,7 @@ def summary_provenance(run: RunData, command: str) -> dict[str, Any]:
         "run directories": [str(run.run_dir), *map(str, run.also_runs)],
         "protocol": sorted(map(str, episodes["protocol"].unique())) if "protocol" in episodes else [],
         "records' code commit": runs.get("code git commit"),
-        "run started (UTC)": runs.get("started (UTC)"),
+        "run started (UTC)": runs.get("started (UTC)") or _sweep_started(run.trials),
         "machine": _machine(runs, episodes),
         "episodes": int(len(episodes)),
         "episode wall time (s, summed)": round(float(pd.to_numeric(episodes["wall_time_s"], errors="coerce").sum()), 1)

@@ -179,24 +179,31 @@ _REFERENCE_SUFFIXES = {"_only_reference": "_only_before", "_only_trial": "_only_
                        "_reference": "_before", "_trial": "_after"}
 
 
-def sweep_reference_table(reference: pd.DataFrame | None) -> ReportTable | None:
+def sweep_reference_table(reference: pd.DataFrame | None, every_trial: bool = False) -> ReportTable | None:
     """The Pareto-front trials paired with each of the sweep's reference methods (`reference.csv` of
-    grits_lab/tune/reference.py), or None without one."""
+    grits_lab/tune/reference.py), or None without one. `every_trial`: every completed trial, by rho,
+    with a Front column: where along rho guidance starts to cost what the reference does."""
     needed = {"reference", "trial", "rho", "s", "paired", "pareto_front"}
     if reference is None or reference.empty or not needed <= set(reference.columns):
         return None  # none, or a table of another shape: nothing said rather than a wrong pairing
-    front = reference[reference["pareto_front"].astype(str).str.lower() == "true"].sort_values(["reference", "trial"])
+    on_front = reference["pareto_front"].astype(str).str.lower() == "true"
+    shown = (reference.assign(_front=on_front).sort_values(["reference", "rho", "s", "trial"]) if every_trial
+             else reference[on_front].assign(_front=True).sort_values(["reference", "trial"]))
     outcomes = [o for o in (c.removesuffix("_p") for c in reference.columns if c.endswith("_p"))
                 if all(f"{o}{k}" in reference.columns for k in _REFERENCE_SUFFIXES)]
-    renamed = front.rename(columns=lambda c: next((c.removesuffix(k) + v for k, v in _REFERENCE_SUFFIXES.items()
+    renamed = shown.rename(columns=lambda c: next((c.removesuffix(k) + v for k, v in _REFERENCE_SUFFIXES.items()
                                                    if c.endswith(k) and c.removesuffix(k) in outcomes), c))
-    head = ["Reference", "Trial", "rho", "s", "Paired"] + [PAIRED_OUTCOMES.get(o, o.replace("_", " ")) for o in outcomes]
-    rows = [[method_display(str(r["reference"])), str(r["trial"]), _fmt(float(r["rho"])), str(r["s"]), str(r["paired"])]
+    head = ["Reference", "Trial", "rho", "s"] + (["Front"] if every_trial else []) + ["Paired"] + [
+        PAIRED_OUTCOMES.get(o, o.replace("_", " ")) for o in outcomes]
+    rows = [[method_display(str(r["reference"])), str(r["trial"]), _fmt(float(r["rho"])), str(r["s"])]
+            + (["yes" if r["_front"] else ""] if every_trial else []) + [str(r["paired"])]
             + [paired_cell(r, o) for o in outcomes] for _, r in renamed.iterrows()]
+    what = "every completed trial, by rho," if every_trial else "the success-spillage front"
     return ReportTable(
-        "sweep_reference", "Sweep: the success-spillage front against the reference, episode by episode",
+        "sweep_reference_all" if every_trial else "sweep_reference", f"Sweep: {what} against the reference, episode by episode",
         "Episodes with each outcome, the reference → the trial, on the validation episodes both ran (same food, level, "
         "trial and seed); (−a +b): episodes that had it only with the reference, only with the trial; p: exact two-sided "
-        "sign test (McNemar's exact test) on those. An episode with an error is no success and a scoop failure.",
-        pd.DataFrame(rows, columns=head), front.reset_index(drop=True),
+        "sign test (McNemar's exact test) on those, one per trial, not corrected for the trials compared. "
+        "An episode with an error is no success and a scoop failure.",
+        pd.DataFrame(rows, columns=head), shown.drop(columns="_front").reset_index(drop=True),
     )

@@ -197,6 +197,8 @@ def test_the_report_of_a_sweep_pairs_its_front_with_the_reference(sweep_file, tm
     section = markdown.split("### Sweep: the success-spillage front against the reference, episode by episode", 1)[1].split("###", 1)[0]
     rows = [line for line in section.splitlines() if line.startswith("| Diffusion Policy")]
     assert len(rows) == len(summary["pareto_front"])
+    every = markdown.split("### Sweep: every completed trial, by rho, against the reference, episode by episode", 1)[1].split("###", 1)[0]
+    assert len([line for line in every.splitlines() if line.startswith("| Diffusion Policy")]) == 4
     for row, paired in zip(rows, sorted(summary["reference"]["dp"]["front"], key=lambda r: r["trial"])):
         cells = [c.strip() for c in row.strip("|").split("|")]
         assert int(cells[1]) == paired["trial"] and int(cells[4]) == paired["paired"]
@@ -217,7 +219,31 @@ def test_a_sweeps_summary_page_renders_its_front_against_the_reference(sweep_fil
     text = render_page("<!-- generated: sweep_reference sweep -->\n<!-- end generated -->\n", page / "README.md", tmp_path / "site")
     rows = [line for line in text.splitlines() if line.startswith("| Diffusion Policy")]
     assert len(rows) == len(summary["pareto_front"]) and "File: [reference.csv](reference.csv)" in text
+    every = render_page("<!-- generated: sweep_trials sweep -->\n<!-- end generated -->\n", page / "README.md", tmp_path / "site")
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in every.splitlines() if line.startswith("| Diffusion Policy")]
+    stored = pd.read_csv(page / "reference.csv")
+    assert len(rows) == len(stored) == 3  # every completed trial, not only the front
+    assert [float(r[2]) for r in rows] == sorted(float(r[2]) for r in rows)  # by rho
+    front = set(stored.loc[stored["pareto_front"], "trial"])
+    assert {int(r[1]) for r in rows if r[4] == "yes"} == front and all(r[4] == "" for r in rows if int(r[1]) not in front)
     # a later summary of the same folder without a reference leaves no reference.csv behind
     (config.study_dir / "reference.csv").unlink()
     write_summary(load_run(config.study_dir), page, "again")
     assert not (page / "reference.csv").exists()
+
+
+def test_a_sweeps_summary_page_dates_the_sweep_by_its_first_trial_and_names_what_it_did_not_record(sweep_file, tmp_path):
+    from grits_lab.report import load_run
+    from grits_lab.report.results_pages import render_page
+    from grits_lab.report.summary import write_summary
+
+    config = load_study_config(sweep_file(n_trials=2))
+    run_sweep(config, progress=False, plots=False)
+    page = tmp_path / "site" / "docs" / "experiments" / "sweep"
+    write_summary(load_run(config.study_dir), page, "grits-lab report STUDY --summary-to PAGE")
+    first = pd.to_datetime(pd.read_csv(config.study_dir / "trials.csv")["datetime_start"]).min()
+    provenance = json.loads((page / "provenance.json").read_text())
+    assert provenance["run started (UTC)"] == first.strftime("%Y-%m-%d %H:%M:%S")
+    text = render_page("<!-- generated: provenance sweep -->\n<!-- end generated -->\n", page / "README.md", tmp_path / "site")
+    assert "records' code: not recorded." in text and "host not recorded" in text
+    assert f"run started {first.strftime('%Y-%m-%d %H:%M:%S')} UTC." in text and "None" not in text
