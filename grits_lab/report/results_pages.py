@@ -234,7 +234,8 @@ def provenance_block(root: Path, name: str, here: Path) -> str:
         trials = method.get("trials", [])
         lines.append(f"- {method['name']}: {method['episodes']} episodes, {method['foods']} foods, levels {', '.join(method['levels'])}, "
                      f"trials {_span(trials)}" + (f"; checkpoints {digests}" if digests else "") + ".")
-    lines.append(f"- Summary written by `{p.get('command')}` (code `{p.get('summary code commit')}`).")
+    commit = p.get("summary code commit")
+    lines.append(f"- Summary written by `{p.get('command')}` (code " + (f"`{commit}`)." if commit else "not recorded)."))
     return "\n".join(lines)
 
 
@@ -275,14 +276,16 @@ def paired_block(root: Path, name: str, here: Path) -> str:
 
 
 def sweep_reference_block(root: Path, name: str, here: Path, every_trial: bool = False) -> str:
-    """A sweep's success-spillage front (`every_trial`: every completed trial, by rho) against its
+    """A sweep's success-spillage front (`every_trial`: every paired trial, by rho) against its
     reference methods (unguided DP) on the same validation episodes, as the summary holds it
     (reference.csv: grits_lab/tune/reference.py)."""
     table = sweep_reference_table(pd.read_csv(_folder(root, name, needs=SWEEP_REFERENCE_FILE) / SWEEP_REFERENCE_FILE),
                                   every_trial=every_trial)
     if table is None:
-        return f"{SWEEP_REFERENCE_FILE} holds no trial" + ("." if every_trial else " on the front.")
+        return f"{SWEEP_REFERENCE_FILE} holds no pairing (empty, or not the table grits_lab/tune/reference.py writes)."
     shown = table.display
+    if shown.empty:
+        return f"No trial on the front is paired in {SWEEP_REFERENCE_FILE}."
     return (f"{markdown_table(list(shown.columns), shown.astype(str).values.tolist())}\n\n{table.caption} "
             f"File: [{SWEEP_REFERENCE_FILE}]({_link(root, name, SWEEP_REFERENCE_FILE, here)}).")
 

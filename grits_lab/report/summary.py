@@ -138,11 +138,12 @@ def _machine(runs: dict[str, Any], episodes: pd.DataFrame) -> dict[str, Any]:
 
 
 def _sweep_started(trials: pd.DataFrame | None) -> str | None:
-    """A sweep's start: its earliest trial's `datetime_start` (trials.csv, grits_lab/tune/outputs.py), None
-    without one. A sweep keeps no provenance.json: its trials may run on several machines."""
+    """A sweep's start: its earliest trial's `datetime_start` in UTC (trials.csv writes UTC-aware times,
+    grits_lab/tune/outputs.py; a time without an offset is read as UTC), None without one. A sweep keeps
+    no provenance.json: its trials may run on several machines."""
     if trials is None or "datetime_start" not in trials:
         return None
-    started = pd.to_datetime(trials["datetime_start"], errors="coerce").dropna()
+    started = pd.to_datetime(trials["datetime_start"].astype(str), utc=True, format="ISO8601", errors="coerce").dropna()
     return started.min().strftime("%Y-%m-%d %H:%M:%S") if len(started) else None
 
 

@@ -181,29 +181,37 @@ _REFERENCE_SUFFIXES = {"_only_reference": "_only_before", "_only_trial": "_only_
 
 def sweep_reference_table(reference: pd.DataFrame | None, every_trial: bool = False) -> ReportTable | None:
     """The Pareto-front trials paired with each of the sweep's reference methods (`reference.csv` of
-    grits_lab/tune/reference.py), or None without one. `every_trial`: every completed trial, by rho,
-    with a Front column: where along rho guidance starts to cost what the reference does."""
+    grits_lab/tune/reference.py), or None without one. `every_trial`: every trial reference.csv pairs
+    (the completed trials whose records could be read), by rho, with a Front column: where along rho guidance starts to cost what the reference does."""
     needed = {"reference", "trial", "rho", "s", "paired", "pareto_front"}
     if reference is None or reference.empty or not needed <= set(reference.columns):
         return None  # none, or a table of another shape: nothing said rather than a wrong pairing
-    on_front = reference["pareto_front"].astype(str).str.lower() == "true"
-    shown = (reference.assign(_front=on_front).sort_values(["reference", "rho", "s", "trial"]) if every_trial
-             else reference[on_front].assign(_front=True).sort_values(["reference", "trial"]))
+    on_front = reference["pareto_front"].map(_is_true)
+    rho = pd.to_numeric(reference["rho"], errors="coerce")
+    shown = (reference.assign(_front=on_front, _rho=rho).sort_values(["reference", "_rho", "s", "trial"]) if every_trial
+             else reference[on_front].assign(_front=True, _rho=rho[on_front]).sort_values(["reference", "trial"]))
     outcomes = [o for o in (c.removesuffix("_p") for c in reference.columns if c.endswith("_p"))
                 if all(f"{o}{k}" in reference.columns for k in _REFERENCE_SUFFIXES)]
     renamed = shown.rename(columns=lambda c: next((c.removesuffix(k) + v for k, v in _REFERENCE_SUFFIXES.items()
                                                    if c.endswith(k) and c.removesuffix(k) in outcomes), c))
     head = ["Reference", "Trial", "rho", "s"] + (["Front"] if every_trial else []) + ["Paired"] + [
         PAIRED_OUTCOMES.get(o, o.replace("_", " ")) for o in outcomes]
-    rows = [[method_display(str(r["reference"])), str(r["trial"]), _fmt(float(r["rho"])), str(r["s"])]
+    rows = [[method_display(str(r["reference"])), str(r["trial"]), _fmt(float(r["_rho"])), str(r["s"])]
             + (["yes" if r["_front"] else ""] if every_trial else []) + [str(r["paired"])]
             + [paired_cell(r, o) for o in outcomes] for _, r in renamed.iterrows()]
-    what = "every completed trial, by rho," if every_trial else "the success-spillage front"
+    what = "every paired trial, by rho," if every_trial else "the success-spillage front"
     return ReportTable(
         "sweep_reference_all" if every_trial else "sweep_reference", f"Sweep: {what} against the reference, episode by episode",
         "Episodes with each outcome, the reference → the trial, on the validation episodes both ran (same food, level, "
         "trial and seed); (−a +b): episodes that had it only with the reference, only with the trial; p: exact two-sided "
         "sign test (McNemar's exact test) on those, one per trial, not corrected for the trials compared. "
         "An episode with an error is no success and a scoop failure.",
-        pd.DataFrame(rows, columns=head), shown.drop(columns="_front").reset_index(drop=True),
+        pd.DataFrame(rows, columns=head), shown.drop(columns=["_front", "_rho"]).reset_index(drop=True),
     )
+
+
+def _is_true(value: Any) -> bool:
+    """A reference.csv flag as pandas, a CSV or a hand edit may hold it: True, "True", " true", 1, 1.0, "yes"."""
+    if isinstance(value, str):
+        return value.strip().lower() in {"true", "1", "1.0", "yes"}
+    return bool(value) and not (isinstance(value, float) and math.isnan(value))

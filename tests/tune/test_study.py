@@ -141,6 +141,22 @@ def test_outputs_best_yaml_is_a_guidance_override(sweep_file, tmp_path):
     assert summary["defaults"]["trial"] == 0 and summary["best"]["n_episodes"] == 8
 
 
+def test_the_best_of_two_front_trials_with_equal_scores_is_the_earlier_one(sweep_file):
+    import optuna
+
+    from grits_lab.tune.outputs import best_trial
+
+    config = load_study_config(sweep_file(objective={"mode": "multi"}))
+    study = optuna.create_study(directions=["maximize", "minimize"])
+    for success, spill in ((0.70, 0.30), (0.65, 0.25)):  # 0.4 and 0.39999999999999997 in floats: one score
+        study.add_trial(optuna.trial.create_trial(
+            params={"rho": 0.1, "s": 30}, distributions={"rho": optuna.distributions.FloatDistribution(0.05, 8.0, log=True),
+                                                          "s": optuna.distributions.IntDistribution(0, 90, step=6)},
+            values=[success, spill], user_attrs={"success_rate": success, "spillage_rate": spill}))
+    best, note = best_trial(study, config)
+    assert best.number == 0 and "Pareto front" in note
+
+
 def test_override_files_carry_the_sweeps_evaluation_overrides_with_the_trials_rho_and_s(sweep_file, tmp_path):
     from grits_lab.evaluation.evaluation_config import load_evaluation_config
 

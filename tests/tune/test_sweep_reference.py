@@ -197,7 +197,7 @@ def test_the_report_of_a_sweep_pairs_its_front_with_the_reference(sweep_file, tm
     section = markdown.split("### Sweep: the success-spillage front against the reference, episode by episode", 1)[1].split("###", 1)[0]
     rows = [line for line in section.splitlines() if line.startswith("| Diffusion Policy")]
     assert len(rows) == len(summary["pareto_front"])
-    every = markdown.split("### Sweep: every completed trial, by rho, against the reference, episode by episode", 1)[1].split("###", 1)[0]
+    every = markdown.split("### Sweep: every paired trial, by rho, against the reference, episode by episode", 1)[1].split("###", 1)[0]
     assert len([line for line in every.splitlines() if line.startswith("| Diffusion Policy")]) == 4
     for row, paired in zip(rows, sorted(summary["reference"]["dp"]["front"], key=lambda r: r["trial"])):
         cells = [c.strip() for c in row.strip("|").split("|")]
@@ -247,3 +247,51 @@ def test_a_sweeps_summary_page_dates_the_sweep_by_its_first_trial_and_names_what
     text = render_page("<!-- generated: provenance sweep -->\n<!-- end generated -->\n", page / "README.md", tmp_path / "site")
     assert "records' code: not recorded." in text and "host not recorded" in text
     assert f"run started {first.strftime('%Y-%m-%d %H:%M:%S')} UTC." in text and "None" not in text
+
+
+def _stored_reference(front_flags, rhos):
+    rows = []
+    for trial, (flag, rho) in enumerate(zip(front_flags, rhos)):
+        row = {"reference": "dp", "trial": trial, "rho": rho, "s": 30, "pareto_front": flag, "paired": 4}
+        for outcome in ("task_success", "spillage", "scoop_failure"):
+            row |= {f"{outcome}_reference": 2, f"{outcome}_trial": 1, f"{outcome}_only_reference": 1,
+                    f"{outcome}_only_trial": 0, f"{outcome}_p": 1.0}
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+@pytest.mark.parametrize("flags", [[True, False, True], ["True", "False", " true"], [1, 0, 1], [1.0, 0.0, 1.0], ["yes", "no", "1"]])
+def test_the_front_flag_reads_as_pandas_a_csv_or_a_hand_edit_writes_it(flags):
+    from grits_lab.report.sweep import sweep_reference_table
+
+    table = sweep_reference_table(_stored_reference(flags, [2.5, 0.1, 10.0]), every_trial=True)
+    assert table.display["Front"].tolist() == ["", "yes", "yes"]  # by rho: 0.1, 2.5, 10
+    assert sweep_reference_table(_stored_reference(flags, [2.5, 0.1, 10.0])).display["Trial"].tolist() == ["0", "2"]
+
+
+def test_trials_sort_by_rho_as_a_number_even_when_the_file_holds_text():
+    from grits_lab.report.sweep import sweep_reference_table
+
+    table = sweep_reference_table(_stored_reference([False] * 3, ["10", "2.5", "0.3"]), every_trial=True)
+    assert table.display["Trial"].tolist() == ["2", "1", "0"]
+
+
+def test_a_page_says_when_no_trial_on_the_front_is_paired(tmp_path):
+    from grits_lab.report.results_pages import render_page
+
+    page = tmp_path / "docs" / "experiments" / "sweep"
+    page.mkdir(parents=True)
+    _stored_reference([False, False], [0.1, 1.0]).to_csv(page / "reference.csv", index=False)
+    text = render_page("<!-- generated: sweep_reference sweep -->\n<!-- end generated -->\n", page / "README.md", tmp_path)
+    assert "No trial on the front is paired in reference.csv." in text and "|" not in text
+    every = render_page("<!-- generated: sweep_trials sweep -->\n<!-- end generated -->\n", page / "README.md", tmp_path)
+    assert len([line for line in every.splitlines() if line.startswith("| Diffusion Policy")]) == 2
+
+
+def test_a_sweep_is_dated_by_its_first_trial_in_utc_whatever_the_offsets():
+    from grits_lab.report.summary import _sweep_started
+
+    trials = pd.DataFrame({"datetime_start": ["2026-12-05 13:08:00.5+00:00", "2026-12-05 13:00:00", "2026-12-05 14:00:00+02:00",
+                                              "not a time", None]})
+    assert _sweep_started(trials) == "2026-12-05 12:00:00"
+    assert _sweep_started(pd.DataFrame({"datetime_start": [None]})) is None and _sweep_started(None) is None
