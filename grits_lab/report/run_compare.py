@@ -149,27 +149,31 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame, *, ceiling: bool = F
 def compare_methods(frame: pd.DataFrame, reference: str = PAIR_REFERENCE) -> pd.DataFrame:
     """Every other method of one run's normalized records (`run_records.normalize_records`) against
     `reference` on the episodes both ran (food, level, trial and seed): `compare_runs`'s columns with
-    the reference as "before", plus `reference`. Empty when the records lack the reference, the
-    per-stage spill columns or any shared episode, or hold a method at several guidance settings
-    (a sweep: no one episode per seed to pair)."""
+    the reference as "before", plus `reference` and `method_name`. A method recorded at several
+    guidance settings or guides is paired once per variant (`method` then holds the variant key, e.g.
+    `grits[rho=0.07, s=78]`). Empty when the records lack the reference, the per-stage spill columns
+    or any shared episode, or hold the reference itself at several settings."""
     if frame is None or frame.empty or "method" not in frame.columns or not has_attribution(frame):
         return pd.DataFrame()
-    if (frame["method"] != reference).all() or frame.duplicated(list(PAIR_KEYS)).any():
+    key = "variant" if "variant" in frame.columns else "method"
+    if (frame["method"] != reference).all() or frame.duplicated([key, *PAIR_KEYS[1:]]).any():
         return pd.DataFrame()
     frame = with_paired_outcomes(frame)
     base = frame[frame["method"] == reference]
+    if base[key].nunique() > 1:
+        return pd.DataFrame()
+    names = dict(zip(frame[key], frame["variant_name"] if "variant_name" in frame.columns else frame[key].map(method_display)))
     tables = []
-    for method in dict.fromkeys(frame["method"]):
-        if method == reference:
-            continue
+    for variant in dict.fromkeys(frame.loc[frame["method"] != reference, key]):
         try:
-            tables.append(compare_runs(base.assign(method=method), frame[frame["method"] == method]))
-        except InputError:  # no episode of this method on the reference's seeds
+            tables.append(compare_runs(base.assign(method=variant), frame[frame[key] == variant].assign(method=variant)))
+        except InputError:  # no episode of this variant on the reference's seeds
             continue
     if not tables:
         return pd.DataFrame()
     table = pd.concat(tables, ignore_index=True)
     table.insert(0, "reference", reference)
+    table.insert(2, "method_name", table["method"].map(names))
     return table
 
 
@@ -184,14 +188,20 @@ def paired_cell(row: pd.Series, outcome: str) -> str:
             f"(−{row[f'{outcome}_only_before']} +{row[f'{outcome}_only_after']}, p {row[f'{outcome}_p']:.2g})")
 
 
+def _method_name(row: pd.Series) -> str:
+    """A paired row's display name: its `method_name` (a variant's, with its setting), else the method's
+    (a paired.csv written before variants were paired has no `method_name`)."""
+    name = row.get("method_name")
+    return str(name) if isinstance(name, str) and name else method_display(str(row["method"]))
+
+
 def paired_methods_markdown(table: pd.DataFrame) -> tuple[list[str], list[list[str]], str]:
     """(header, rows, caption) of `compare_methods`'s table: per method, the reference's count →
     the method's on the same episodes, the discordant pairs and the sign test."""
     reference = method_display(str(table["reference"].iloc[0]))
     outcomes = _held_outcomes(table)
     head = ["Method", "Paired episodes"] + [PAIRED_OUTCOMES[o] for o in outcomes]
-    rows = [[method_display(row["method"]), str(row["paired"])] + [paired_cell(row, o) for o in outcomes]
-            for _, row in table.iterrows()]
+    rows = [[_method_name(row), str(row["paired"])] + [paired_cell(row, o) for o in outcomes] for _, row in table.iterrows()]
     caption = (f"Episodes with each outcome, {reference} → the method, on the episodes both ran (same food, level, trial "
                f"and seed); (−a +b): episodes that had it only with {reference}, only with the method; p: exact two-sided "
                "sign test (McNemar's exact test) on those. Episodes with an error in either are left out.")

@@ -136,6 +136,36 @@ def test_every_method_is_paired_with_dp_on_the_episodes_both_ran(tmp_path):
     assert "| GRITS | 4 | 2 → 2 (−1 +1, p 1) | 2 → 1 (−1 +0, p 1) |" in page
 
 
+def test_a_method_at_two_guidance_settings_is_paired_with_dp_once_per_setting(tmp_path):
+    from grits_lab.report.results_pages import render_all
+    from grits_lab.report.run_compare import compare_methods
+    from grits_lab.report.run_records import load_run
+    from grits_lab.report.summary import write_summary
+
+    rows = []
+    for method, rho, s, outcomes in (("dp", float("nan"), -1, ["spill", "spill", "success"]),
+                                     ("grits", 0.07, 78, ["success", "spill", "success"]),
+                                     ("grits", 2.5, 30, ["scoop_fail", "scoop_fail", "spill"])):
+        for trial, outcome in enumerate(outcomes):
+            row = episode(method, "sago", "low", trial, outcome, rho=rho, s=s)
+            row.update({c: 0 for c in attribution_columns()}, scoop_steps=40)
+            rows.append(row)
+    run = tmp_path / "run"
+    run.mkdir()
+    pd.DataFrame(rows).to_parquet(run / "episodes.parquet")
+    table = compare_methods(load_run(run).episodes).set_index("method_name")
+    assert sorted(table.index) == ["GRITS (rho=0.07, s=78)", "GRITS (rho=2.5, s=30)"]
+    tuned, paper = table.loc["GRITS (rho=0.07, s=78)"], table.loc["GRITS (rho=2.5, s=30)"]
+    assert (tuned["paired"], tuned["spillage_before"], tuned["spillage_after"], tuned["spillage_only_before"]) == (3, 2, 1, 1)
+    assert (paper["scoop_failure_before"], paper["scoop_failure_after"], paper["task_success_after"]) == (0, 2, 0)
+    folder = tmp_path / "docs" / "experiments" / "pair"
+    write_summary(load_run(run), folder, "grits-lab report run --summary-to docs/experiments/pair")
+    (folder / "README.md").write_text("# Pair\n\n<!-- generated: paired pair -->\n<!-- end generated -->\n")
+    page = render_all(tmp_path)[folder / "README.md"]
+    assert "| GRITS (rho=0.07, s=78) | 3 | 1 → 2 (−0 +1, p 1) | 2 → 1 (−1 +0, p 1) |" in page
+    assert "| GRITS (rho=2.5, s=30) | 3 |" in page
+
+
 def test_spills_before_the_pour_count_the_scoop_lift_and_carry_and_not_the_pour(tmp_path):
     from grits_lab.report.run_compare import compare_methods, paired_methods_markdown
     from grits_lab.report.run_records import load_run
