@@ -221,12 +221,11 @@ def provenance_block(root: Path, name: str, here: Path) -> str:
     kernels = machine.get("cpu kernels (episodes)", {})
     cpu = (f"; CPU {machine['cpu']}" if machine.get("cpu") else "") + (
         "; CPU kernels " + ", ".join(f"`{k}` ({n} episode{'' if n == 1 else 's'})" for k, n in kernels.items()) if kernels else "")
-    started = p.get("run started (UTC)")
+    started, host = p.get("run started (UTC)"), machine.get("host")
     lines = [
-        f"- Protocol: {', '.join(p.get('protocol', [])) or 'not recorded'}; records' code: "
-        + (f"`{records_commit}`." if records_commit else "not recorded."),
-        f"- Machine: host " + (f"`{machine['host']}`" if machine.get("host") else "not recorded")
-        + f"{'; ' + shown if shown else ''}{cpu}; run started " + (f"{started} UTC." if started else "not recorded."),
+        f"- Protocol: {', '.join(p.get('protocol', [])) or 'not recorded'}; records' code: {_recorded(records_commit, f'`{records_commit}`')}.",
+        f"- Machine: host {_recorded(host, f'`{host}`')}{'; ' + shown if shown else ''}{cpu}; "
+        f"run started {_recorded(started, f'{started} UTC')}.",
         f"- Episode wall time, summed: {_duration(p.get('episode wall time (s, summed)'))}.",
     ]
     for method in p.get("methods", {}).values():
@@ -235,8 +234,13 @@ def provenance_block(root: Path, name: str, here: Path) -> str:
         lines.append(f"- {method['name']}: {method['episodes']} episodes, {method['foods']} foods, levels {', '.join(method['levels'])}, "
                      f"trials {_span(trials)}" + (f"; checkpoints {digests}" if digests else "") + ".")
     commit = p.get("summary code commit")
-    lines.append(f"- Summary written by `{p.get('command')}` (code " + (f"`{commit}`)." if commit else "not recorded)."))
+    lines.append(f"- Summary written by `{p.get('command')}` (code {_recorded(commit, f'`{commit}`')}).")
     return "\n".join(lines)
+
+
+def _recorded(value: object, shown: str) -> str:
+    """`shown` where the provenance recorded `value`; "not recorded" where it holds none (a sweep's summary)."""
+    return shown if value else "not recorded"
 
 
 def headline_block(root: Path, name: str, here: Path) -> str:

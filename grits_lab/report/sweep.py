@@ -182,14 +182,14 @@ _REFERENCE_SUFFIXES = {"_only_reference": "_only_before", "_only_trial": "_only_
 def sweep_reference_table(reference: pd.DataFrame | None, every_trial: bool = False) -> ReportTable | None:
     """The Pareto-front trials paired with each of the sweep's reference methods (`reference.csv` of
     grits_lab/tune/reference.py), or None without one. `every_trial`: every trial reference.csv pairs
-    (the completed trials whose records could be read), by rho, with a Front column: where along rho guidance starts to cost what the reference does."""
+    (the completed trials whose records could be read), by rho, with a Front column: where along rho
+    guidance starts to cost what the reference does."""
     needed = {"reference", "trial", "rho", "s", "paired", "pareto_front"}
     if reference is None or reference.empty or not needed <= set(reference.columns):
         return None  # none, or a table of another shape: nothing said rather than a wrong pairing
-    on_front = reference["pareto_front"].map(_is_true)
-    rho = pd.to_numeric(reference["rho"], errors="coerce")
-    shown = (reference.assign(_front=on_front, _rho=rho).sort_values(["reference", "_rho", "s", "trial"]) if every_trial
-             else reference[on_front].assign(_front=True, _rho=rho[on_front]).sort_values(["reference", "trial"]))
+    marked = reference.assign(_front=reference["pareto_front"].map(_is_true), _rho=pd.to_numeric(reference["rho"], errors="coerce"))
+    shown = (marked.sort_values(["reference", "_rho", "s", "trial"]) if every_trial
+             else marked[marked["_front"]].sort_values(["reference", "trial"]))
     outcomes = [o for o in (c.removesuffix("_p") for c in reference.columns if c.endswith("_p"))
                 if all(f"{o}{k}" in reference.columns for k in _REFERENCE_SUFFIXES)]
     renamed = shown.rename(columns=lambda c: next((c.removesuffix(k) + v for k, v in _REFERENCE_SUFFIXES.items()
