@@ -25,7 +25,7 @@ from grits_lab.report import figures
 from grits_lab.report.run_records import RunData, load_run
 from grits_lab.report.provenance import episode_counts, error_messages, protocol_summary, report_provenance
 from grits_lab.report.real_robot import real_robot_table
-from grits_lab.report.run_compare import PAIR_REFERENCE, paired_methods_table
+from grits_lab.report.run_compare import paired_methods_table, paired_section_title
 from grits_lab.report.guidance_effect import guidance_by_plan_table, guidance_figure, guidance_table, guided_episodes
 from grits_lab.report.headline import headline_sentence, headline_table
 from grits_lab.report.render import (
@@ -153,7 +153,7 @@ def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Sec
                                  figures.per_food_stacks(fig6.data, out / "figures" / "fig6_per_food.png", fig6.title), result))
         sections.append(Section("Fig. 6: per food", items))
         if (paired := paired_methods_table(episodes)) is not None:
-            sections.append(Section(f"Paired with {method_display(PAIR_REFERENCE)}", [_table(paired, out, result)]))
+            sections.append(Section(paired_section_title(paired.data), [_table(paired, out, result)]))
         lost = [_table(failure_table(episodes), out, result), _table(spill_attribution_table(episodes), out, result),
                 _table(delivery_table(episodes), out, result)]
         if (loss_png := load_loss_figure(episodes, out / "figures" / "load_loss.png")) is not None:

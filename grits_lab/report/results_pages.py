@@ -276,7 +276,7 @@ def paired_block(root: Path, name: str, here: Path) -> str:
     """Every method against Diffusion Policy on the same episodes, as the summary holds it (paired.csv)."""
     table = pd.read_csv(_folder(root, name, needs=PAIRED_METHODS_FILE) / PAIRED_METHODS_FILE)
     head, rows, caption = paired_methods_markdown(table)
-    return f"{markdown_table(head, rows)}\n\n{caption} File: [{PAIRED_METHODS_FILE}]({_link(root, name, PAIRED_METHODS_FILE, here)})."
+    return f"{markdown_table(head, rows, right=head.index('Paired episodes'))}\n\n{caption} File: [{PAIRED_METHODS_FILE}]({_link(root, name, PAIRED_METHODS_FILE, here)})."
 
 
 def sweep_reference_block(root: Path, name: str, here: Path, every_trial: bool = False) -> str:

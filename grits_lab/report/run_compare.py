@@ -8,7 +8,8 @@ episodes where only one run had it, and the exact two-sided sign test (McNemar's
 those discordant pairs.
 
 `compare_methods` pairs the methods of one run the same way: every method against a reference
-method (Diffusion Policy) on the episodes both ran, the report's "Paired with Diffusion Policy".
+method (Diffusion Policy) on the episodes both ran, and a method recorded at several guidance settings
+or guides once more against its own first variant, the report's "Paired on the same episodes".
 """
 
 from __future__ import annotations
@@ -149,10 +150,12 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame, *, ceiling: bool = F
 def compare_methods(frame: pd.DataFrame, reference: str = PAIR_REFERENCE) -> pd.DataFrame:
     """Every other method of one run's normalized records (`run_records.normalize_records`) against
     `reference` on the episodes both ran (food, level, trial and seed): `compare_runs`'s columns with
-    the reference as "before", plus `reference` and `method_name`. A method recorded at several
-    guidance settings or guides is paired once per variant (`method` then holds the variant key, e.g.
-    `grits[rho=0.07, s=78]`). Empty when the records lack the reference, the per-stage spill columns
-    or any shared episode, or hold the reference itself at several settings."""
+    the reference as "before", plus `reference`, `reference_name` and `method_name`. A method recorded
+    at several guidance settings or guides is paired once per variant (`method` then holds the variant
+    key, e.g. `grits[rho=0.07, s=78]`), and each of its later variants is paired once more against its
+    first in the records (`reference` then holds that variant's key): tuned guidance against the paper's
+    values on the same seeds. Empty when the records lack the reference, the per-stage spill columns or
+    any shared episode, or hold the reference itself at several settings."""
     if frame is None or frame.empty or "method" not in frame.columns or not has_attribution(frame):
         return pd.DataFrame()
     key = "variant" if "variant" in frame.columns else "method"
@@ -163,17 +166,24 @@ def compare_methods(frame: pd.DataFrame, reference: str = PAIR_REFERENCE) -> pd.
     if base[key].nunique() > 1:
         return pd.DataFrame()
     names = dict(zip(frame[key], frame["variant_name"] if "variant_name" in frame.columns else frame[key].map(method_display)))
+    others = frame[frame["method"] != reference]
+    pairs = [(str(base[key].iloc[0]), variant) for variant in dict.fromkeys(others[key])]
+    for _, variants in others.groupby("method", sort=False)[key]:
+        first, *later = dict.fromkeys(variants)
+        pairs += [(first, variant) for variant in later]
     tables = []
-    for variant in dict.fromkeys(frame.loc[frame["method"] != reference, key]):
+    for before, after in pairs:
         try:
-            tables.append(compare_runs(base.assign(method=variant), frame[frame[key] == variant].assign(method=variant)))
+            table = compare_runs(frame[frame[key] == before].assign(method=after), frame[frame[key] == after].assign(method=after))
         except InputError:  # no episode of this variant on the reference's seeds
             continue
+        tables.append(table.assign(reference=before, reference_name=names[before]))
     if not tables:
         return pd.DataFrame()
     table = pd.concat(tables, ignore_index=True)
-    table.insert(0, "reference", reference)
-    table.insert(2, "method_name", table["method"].map(names))
+    table.insert(0, "reference", table.pop("reference"))
+    table.insert(1, "reference_name", table.pop("reference_name"))
+    table.insert(3, "method_name", table["method"].map(names))
     return table
 
 
@@ -188,34 +198,48 @@ def paired_cell(row: pd.Series, outcome: str) -> str:
             f"(−{row[f'{outcome}_only_before']} +{row[f'{outcome}_only_after']}, p {row[f'{outcome}_p']:.2g})")
 
 
-def _method_name(row: pd.Series) -> str:
-    """A paired row's display name: its `method_name` (a variant's, with its setting), else the method's
-    (a paired.csv written before variants were paired has no `method_name`)."""
-    name = row.get("method_name")
-    return str(name) if isinstance(name, str) and name else method_display(str(row["method"]))
+def _method_name(row: pd.Series, column: str = "method") -> str:
+    """A paired row's display name for `column` (`method` or `reference`): its `<column>_name` (a
+    variant's, with its setting), else the method's (a paired.csv written before variants were paired
+    has neither name)."""
+    name = row.get(f"{column}_name")
+    return str(name) if isinstance(name, str) and name else method_display(str(row[column]))
 
 
 def paired_methods_markdown(table: pd.DataFrame) -> tuple[list[str], list[list[str]], str]:
     """(header, rows, caption) of `compare_methods`'s table: per method, the reference's count →
-    the method's on the same episodes, the discordant pairs and the sign test."""
-    reference = method_display(str(table["reference"].iloc[0]))
+    the method's on the same episodes, the discordant pairs and the sign test. With more than one
+    reference (a method's variants paired with each other too) the rows name theirs."""
     outcomes = _held_outcomes(table)
-    head = ["Method", "Paired episodes"] + [PAIRED_OUTCOMES[o] for o in outcomes]
-    rows = [[_method_name(row), str(row["paired"])] + [paired_cell(row, o) for o in outcomes] for _, row in table.iterrows()]
-    caption = (f"Episodes with each outcome, {reference} → the method, on the episodes both ran (same food, level, trial "
-               f"and seed); (−a +b): episodes that had it only with {reference}, only with the method; p: exact two-sided "
+    several = table["reference"].nunique() > 1
+    head = ["Method"] + (["Against"] if several else []) + ["Paired episodes"] + [PAIRED_OUTCOMES[o] for o in outcomes]
+    rows = [[_method_name(row)] + ([_method_name(row, "reference")] if several else []) + [str(row["paired"])]
+            + [paired_cell(row, o) for o in outcomes] for _, row in table.iterrows()]
+    reference = _method_name(table.iloc[0], "reference")
+    first, other = (("the reference", "the method") if several else (reference, "the method"))
+    caption = (f"Episodes with each outcome, {first} → {other}, on the episodes both ran (same food, level, trial "
+               f"and seed); (−a +b): episodes that had it only with {first}, only with {other}; p: exact two-sided "
                "sign test (McNemar's exact test) on those. Episodes with an error in either are left out.")
+    if several:
+        caption += (f" Against: {reference} for every method, and a method's first setting in the records for its "
+                    "other settings.")
     return head, rows, caption
 
 
 def paired_methods_table(episodes: pd.DataFrame | None, reference: str = PAIR_REFERENCE) -> ReportTable | None:
-    """The report's "Paired with Diffusion Policy" table, or None when `compare_methods` pairs nothing."""
+    """The report's "Paired on the same episodes" table, or None when `compare_methods` pairs nothing."""
     table = compare_methods(episodes, reference) if episodes is not None else pd.DataFrame()
     if table.empty:
         return None
     head, rows, caption = paired_methods_markdown(table)
-    return ReportTable("paired_methods", f"Paired with {method_display(reference)}: the same episodes, outcome by outcome",
+    return ReportTable("paired_methods", f"{paired_section_title(table)}: the same episodes, outcome by outcome",
                        caption, pd.DataFrame(rows, columns=head), table)
+
+
+def paired_section_title(table: pd.DataFrame) -> str:
+    """"Paired with <reference>", or "Paired with each other" when a method's settings are paired too."""
+    return ("Paired with each other" if table["reference"].nunique() > 1
+            else f"Paired with {_method_name(table.iloc[0], 'reference')}")
 
 
 def comparison_markdown(table: pd.DataFrame) -> str:

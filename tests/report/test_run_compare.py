@@ -136,7 +136,8 @@ def test_every_method_is_paired_with_dp_on_the_episodes_both_ran(tmp_path):
     assert "| GRITS | 4 | 2 → 2 (−1 +1, p 1) | 2 → 1 (−1 +0, p 1) |" in page
 
 
-def test_a_method_at_two_guidance_settings_is_paired_with_dp_once_per_setting(tmp_path):
+def test_a_method_at_two_guidance_settings_is_paired_with_dp_once_per_setting_and_with_each_other(tmp_path):
+    from grits_lab.report.build import build_report
     from grits_lab.report.results_pages import render_all
     from grits_lab.report.run_compare import compare_methods
     from grits_lab.report.run_records import load_run
@@ -153,17 +154,29 @@ def test_a_method_at_two_guidance_settings_is_paired_with_dp_once_per_setting(tm
     run = tmp_path / "run"
     run.mkdir()
     pd.DataFrame(rows).to_parquet(run / "episodes.parquet")
-    table = compare_methods(load_run(run).episodes).set_index("method_name")
-    assert sorted(table.index) == ["GRITS (rho=0.07, s=78)", "GRITS (rho=2.5, s=30)"]
-    tuned, paper = table.loc["GRITS (rho=0.07, s=78)"], table.loc["GRITS (rho=2.5, s=30)"]
+    table = compare_methods(load_run(run).episodes)
+    with_dp = table[table["reference"] == "dp"].set_index("method_name")
+    assert sorted(with_dp.index) == ["GRITS (rho=0.07, s=78)", "GRITS (rho=2.5, s=30)"]
+    tuned, paper = with_dp.loc["GRITS (rho=0.07, s=78)"], with_dp.loc["GRITS (rho=2.5, s=30)"]
     assert (tuned["paired"], tuned["spillage_before"], tuned["spillage_after"], tuned["spillage_only_before"]) == (3, 2, 1, 1)
     assert (paper["scoop_failure_before"], paper["scoop_failure_after"], paper["task_success_after"]) == (0, 2, 0)
+    # The later setting against the first in the records, on the same seeds: success 2 -> 0, scoop failure 0 -> 2.
+    between = table[table["reference"] != "dp"]
+    assert len(between) == 1
+    row = between.iloc[0]
+    assert (row["reference_name"], row["method_name"], row["paired"]) == ("GRITS (rho=0.07, s=78)", "GRITS (rho=2.5, s=30)", 3)
+    assert (row["task_success_before"], row["task_success_after"], row["task_success_only_before"]) == (2, 0, 2)
+    assert (row["scoop_failure_before"], row["scoop_failure_after"], row["spillage_before"], row["spillage_after"]) == (0, 2, 1, 1)
     folder = tmp_path / "docs" / "experiments" / "pair"
     write_summary(load_run(run), folder, "grits-lab report run --summary-to docs/experiments/pair")
     (folder / "README.md").write_text("# Pair\n\n<!-- generated: paired pair -->\n<!-- end generated -->\n")
     page = render_all(tmp_path)[folder / "README.md"]
-    assert "| GRITS (rho=0.07, s=78) | 3 | 1 → 2 (−0 +1, p 1) | 2 → 1 (−1 +0, p 1) |" in page
-    assert "| GRITS (rho=2.5, s=30) | 3 |" in page
+    assert "| GRITS (rho=0.07, s=78) | Diffusion Policy | 3 | 1 → 2 (−0 +1, p 1) | 2 → 1 (−1 +0, p 1) |" in page
+    assert "| GRITS (rho=2.5, s=30) | Diffusion Policy | 3 |" in page
+    assert "| GRITS (rho=2.5, s=30) | GRITS (rho=0.07, s=78) | 3 | 2 → 0 (−2 +0, p 0.5) |" in page
+    assert "a method's first setting in the records for its other settings" in page
+    build_report(run, tmp_path / "report")
+    assert "## Paired with each other" in (tmp_path / "report" / "report.md").read_text()
 
 
 def test_spills_before_the_pour_count_the_scoop_lift_and_carry_and_not_the_pour(tmp_path):
