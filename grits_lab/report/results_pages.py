@@ -9,7 +9,8 @@ A page holds generated blocks between two markers; everything outside them is ha
 KIND is one of BLOCKS: `outcomes`, `stages`, `provenance`, `headline` and `claims` read the
 summary files of docs/experiments/EXPERIMENT/ (grits_lab/report/summary.py); `comparison` reads
 the paired comparison `grits-lab compare-runs` writes there; `paired` every method against Diffusion
-Policy on the same episodes; `sweep_reference` a sweep's front against its reference methods and
+Policy on the same episodes; `per_food` each method's spills and successes food by food (the page's
+episodes.csv); `sweep_reference` a sweep's front against its reference methods and
 `sweep_trials` every one of its trials (a sweep's summary: `grits-lab report results/sweeps/NAME
 --summary-to ...`); `shift BEFORE..AFTER[+AFTER...]`
 sets each method's outcomes in one summary beside another's (a protocol before and after a change,
@@ -39,7 +40,7 @@ from grits_lab.report.spill_tables import CAUSE_NAMES, STAGE_NAMES
 from grits_lab.report.run_records import SWEEP_REFERENCE_FILE
 from grits_lab.report.summary import CLAIMS_FILE, PROVENANCE_FILE, STAGES_FILE, SUMMARY_FILE
 from grits_lab.report.sweep import sweep_reference_table
-from grits_lab.report.vocabulary import MAIN_METHODS, PAPER_RESULTS
+from grits_lab.report.vocabulary import MAIN_METHODS, PAPER_RESULTS, UNSEEN_FOODS, food_display, ordered
 from grits_lab.sim.spill_metrics import SPILL_CAUSES, SPILL_STAGES
 
 EXPERIMENTS_DIR = Path("docs") / "experiments"
@@ -211,6 +212,42 @@ def stages_block(root: Path, name: str, here: Path) -> str:
     return f"{table}\n\nEpisodes (particles) that lost food each way, stages with a loss only. File: [{STAGES_FILE}]({_link(root, name, STAGES_FILE, here)})."
 
 
+PER_FOOD_OUTCOMES = {"spillage": "spill during the scoop", "spill_before_pour": "spill before the pour",
+                     "task_success": "task success"}
+
+
+def per_food_block(root: Path, name: str, here: Path) -> str:
+    """Per outcome of PER_FOOD_OUTCOMES a table, foods by method, of the episodes with it as "k/n"
+    (the page's episodes.csv; episodes with an error left out), the paper's foods in its order and
+    every food last: where a method's spills were, or were removed, food by food."""
+    from grits_lab.report.run_compare import with_paired_outcomes
+    from grits_lab.report.run_records import PAGE_RECORDS_FILE, load_run
+    from grits_lab.report.spill_tables import has_attribution
+
+    folder = _folder(root, name, needs=PAGE_RECORDS_FILE)
+    episodes = load_run(folder).episodes
+    if not has_attribution(episodes):
+        return "The records predate the per-stage attribution (`spilled_<stage>_<cause>` columns)."
+    episodes = with_paired_outcomes(episodes[~episodes["is_error"].astype(bool)])
+    key = "variant" if "variant" in episodes.columns else "method"
+    names = dict(zip(episodes[key], episodes["variant_name"] if "variant_name" in episodes.columns else episodes[key]))
+    foods = [*ordered(episodes["food_key"].unique(), tuple(UNSEEN_FOODS)), None]
+    parts = []
+    for outcome, label in PER_FOOD_OUTCOMES.items():
+        rows = []
+        for food in foods:
+            of_food = episodes if food is None else episodes[episodes["food_key"] == food]
+            cells = []
+            for variant in names:
+                held = of_food[of_food[key] == variant]
+                cells.append(f"{int(held[outcome].astype(bool).sum())}/{len(held)}" if len(held) else "—")
+            rows.append(["Every food" if food is None else food_display(food, long=True)] + cells)
+        parts.append(f"*{label[0].upper()}{label[1:]}*\n\n{markdown_table(['Food', *names.values()], rows)}")
+    return ("\n\n".join(parts) + "\n\nEpisodes with each outcome of the food's episodes without an error (k/n). Spill "
+            "before the pour: food lost in the scoop, lift or carry. "
+            f"File: [{PAGE_RECORDS_FILE}]({_link(root, name, PAGE_RECORDS_FILE, here)}).")
+
+
 def provenance_block(root: Path, name: str, here: Path) -> str:
     """Protocol, commits, machine, dates, wall time, checkpoints and episodes per method, as bullets."""
     p = _provenance(root, name)
@@ -348,6 +385,7 @@ BLOCKS: dict[str, Callable[[Path, str, Path], str]] = {
     "claims": claims_block,
     "comparison": comparison_block,
     "paired": paired_block,
+    "per_food": per_food_block,
     "shift": shift_block,
     "sweep_reference": sweep_reference_block,
     "sweep_trials": partial(sweep_reference_block, every_trial=True),

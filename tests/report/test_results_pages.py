@@ -178,3 +178,31 @@ def test_the_summary_counts_episodes_per_cpu_kernels_and_the_page_names_them(tmp
     block = provenance_block(tmp_path, "tiny", out)
     assert ("; CPU AMD EPYC; CPU kernels `numpy X86_V3+X86_V4; openblas SkylakeX` (1 episode), "
             "`numpy X86_V3; openblas Haswell` (3 episodes); run started") in block
+
+
+def test_a_per_food_block_counts_each_methods_outcomes_food_by_food_without_errored_episodes(tmp_path):
+    from grits_lab.report.run_records import load_run
+    from grits_lab.report.summary import write_summary
+
+    # dp: sago spills in the scoop once of 2, red bean loses food in the carry; grits: no spill, one error on red bean.
+    rows = []
+    for method, food, trial, outcome, lost, error in (
+            ("dp", "sago", 0, "spill", {"spilled_scoop_over_rim": 2}, ""), ("dp", "sago", 1, "success", {}, ""),
+            ("dp", "red_bean", 0, "transfer_fail", {"spilled_carry_off_spoon": 3}, ""),
+            ("grits", "sago", 0, "success", {}, ""), ("grits", "sago", 1, "success", {}, ""),
+            ("grits", "red_bean", 0, "success", {}, "boom")):
+        row = episode(method, food, "brim", trial, outcome, error=error)
+        row.update({c: 0 for c in attribution_columns()}, **lost)
+        rows.append(row)
+    run = tmp_path / "run"
+    run.mkdir()
+    pd.DataFrame(rows).to_parquet(run / "episodes.parquet")
+    folder = tmp_path / "docs" / "experiments" / "foods"
+    write_summary(load_run(run), folder, "grits-lab report run --summary-to docs/experiments/foods")
+    (folder / "README.md").write_text("# Foods\n\n<!-- generated: per_food foods -->\n<!-- end generated -->\n")
+    page = render_all(tmp_path)[folder / "README.md"]
+    scoop, before_pour, success = page.split("*Spill during the scoop*")[1], page.split("*Spill before the pour*")[1], page.split("*Task success*")[1]
+    assert "| SA sago | 1/2 | 0/2 |" in scoop and "| RB red bean | 0/1 | — |" in scoop  # the errored episode is left out
+    assert "| RB red bean | 1/1 | — |" in before_pour and "| Every food | 2/3 | 0/2 |" in before_pour
+    assert "| SA sago | 1/2 | 2/2 |" in success
+    assert scoop.index("SA sago") < scoop.index("RB red bean")  # the paper's food order
