@@ -20,7 +20,8 @@ import pandas as pd  # noqa: E402
 from grits_lab.intervals import percent_digits  # noqa: E402
 from grits_lab.io import atomic_path  # noqa: E402
 from grits_lab.records import OUTCOME_COLUMNS  # noqa: E402
-from grits_lab.report.sweep import PAPER_DEFAULTS, SweepSummary  # noqa: E402
+from grits_lab.report.sweep import SweepSummary  # noqa: E402
+from grits_lab.report.vocabulary import PAPER_DEFAULTS  # noqa: E402
 from grits_lab.report.tables import PER_FOOD_CATEGORIES, PER_FOOD_CATEGORY_NAMES  # noqa: E402
 from grits_lab.report.vocabulary import (  # noqa: E402
     FOOD_ABBREVIATIONS,

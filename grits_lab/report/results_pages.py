@@ -223,14 +223,16 @@ def per_food_block(root: Path, name: str, here: Path) -> str:
     from grits_lab.report.run_compare import with_paired_outcomes
     from grits_lab.report.run_records import PAGE_RECORDS_FILE, load_run
     from grits_lab.report.spill_tables import has_attribution
+    from grits_lab.report.tables import all_variants
 
     folder = _folder(root, name, needs=PAGE_RECORDS_FILE)
     episodes = load_run(folder).episodes
     if not has_attribution(episodes):
         return "The records predate the per-stage attribution (`spilled_<stage>_<cause>` columns)."
+    names = dict(all_variants(episodes))  # the outcomes block's columns, a method that only errored included
     episodes = with_paired_outcomes(episodes[~episodes["is_error"].astype(bool)])
-    key = "variant" if "variant" in episodes.columns else "method"
-    names = dict(zip(episodes[key], episodes["variant_name"] if "variant_name" in episodes.columns else episodes[key]))
+    if episodes.empty:
+        return "Every episode ended with an error."
     foods = [*ordered(episodes["food_key"].unique(), tuple(UNSEEN_FOODS)), None]
     parts = []
     for outcome, label in PER_FOOD_OUTCOMES.items():
@@ -239,7 +241,7 @@ def per_food_block(root: Path, name: str, here: Path) -> str:
             of_food = episodes if food is None else episodes[episodes["food_key"] == food]
             cells = []
             for variant in names:
-                held = of_food[of_food[key] == variant]
+                held = of_food[of_food["variant"] == variant]
                 cells.append(f"{int(held[outcome].astype(bool).sum())}/{len(held)}" if len(held) else "—")
             rows.append(["Every food" if food is None else food_display(food, long=True)] + cells)
         parts.append(f"*{label[0].upper()}{label[1:]}*\n\n{markdown_table(['Food', *names.values()], rows)}")
@@ -310,7 +312,8 @@ def comparison_block(root: Path, name: str, here: Path) -> str:
 
 
 def paired_block(root: Path, name: str, here: Path) -> str:
-    """Every method against Diffusion Policy on the same episodes, as the summary holds it (paired.csv)."""
+    """Every method against Diffusion Policy on the same episodes, and a method's settings against its
+    reference setting, as the summary holds it (paired.csv)."""
     table = pd.read_csv(_folder(root, name, needs=PAIRED_METHODS_FILE) / PAIRED_METHODS_FILE)
     head, rows, caption = paired_methods_markdown(table)
     return f"{markdown_table(head, rows, right=head.index('Paired episodes'))}\n\n{caption} File: [{PAIRED_METHODS_FILE}]({_link(root, name, PAIRED_METHODS_FILE, here)})."

@@ -9,7 +9,8 @@ those discordant pairs.
 
 `compare_methods` pairs the methods of one run the same way: every method against a reference
 method (Diffusion Policy) on the episodes both ran, and a method recorded at several guidance settings
-or guides once more against its own first variant, the report's "Paired on the same episodes".
+or guides once more against its reference setting (`setting_reference`), the report's "Paired with
+Diffusion Policy" (or "Paired with each other" when settings are paired too).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from grits_lab.report.run_records import load_run
 from grits_lab.report.spill_tables import (delivered_share, has_attribution, lifted_episodes, spilled_after_scoop,
                                            spilled_before_pour)
 from grits_lab.report.tables import ReportTable
-from grits_lab.report.vocabulary import method_display
+from grits_lab.report.vocabulary import PAPER_DEFAULTS, method_display
 
 PAIR_KEYS = ("method", "food", "level", "trial")
 OFFSET_COLUMN = "scoop_action_offset_m"  # `scoop.action_offset` of the run (docs/evaluation.md, "Outcome sensitivity")
@@ -147,15 +148,32 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame, *, ceiling: bool = F
     return pd.DataFrame(rows)
 
 
+def setting_reference(rows: pd.DataFrame, key: str = "variant") -> str:
+    """Of one method's records at several settings, the variant its other settings are paired with: the
+    one at the paper's values (`PAPER_DEFAULTS`, rho 2.5 and s 30), else the lowest (rho, s), a predictor
+    digest breaking ties; the same whatever order the records come in (a page's episodes.csv is sorted)."""
+    columns = [c for c in ("rho", "s", "checkpoint_predictor") if c in rows.columns]
+    settings = rows.drop_duplicates(key)[[key, *columns]].copy()
+    settings["_paper"] = False
+    if {"rho", "s"} <= set(columns):
+        rho = pd.to_numeric(settings["rho"], errors="coerce")
+        settings["_paper"] = ((rho - PAPER_DEFAULTS["rho"]).abs() < 1e-9) & (settings["s"] == PAPER_DEFAULTS["s"])
+    if "checkpoint_predictor" in columns:
+        settings["checkpoint_predictor"] = settings["checkpoint_predictor"].astype(str)
+    settings = settings.sort_values(["_paper", *columns, key], ascending=[False] + [True] * (len(columns) + 1), na_position="last")
+    return str(settings[key].iloc[0])
+
+
 def compare_methods(frame: pd.DataFrame, reference: str = PAIR_REFERENCE) -> pd.DataFrame:
     """Every other method of one run's normalized records (`run_records.normalize_records`) against
     `reference` on the episodes both ran (food, level, trial and seed): `compare_runs`'s columns with
     the reference as "before", plus `reference`, `reference_name` and `method_name`. A method recorded
     at several guidance settings or guides is paired once per variant (`method` then holds the variant
-    key, e.g. `grits[rho=0.07, s=78]`), and each of its later variants is paired once more against its
-    first in the records (`reference` then holds that variant's key): tuned guidance against the paper's
-    values on the same seeds. Empty when the records lack the reference, the per-stage spill columns or
-    any shared episode, or hold the reference itself at several settings."""
+    key, e.g. `grits[rho=0.07, s=78]`), and each of its other variants is paired once more against its
+    `setting_reference` (`reference` then holds that variant's key): tuned guidance against the paper's
+    values on the same seeds. A pair that shares no episode is left out. Empty when the records lack
+    the reference, the per-stage spill columns or any shared episode, or hold the reference itself at
+    several settings."""
     if frame is None or frame.empty or "method" not in frame.columns or not has_attribution(frame):
         return pd.DataFrame()
     key = "variant" if "variant" in frame.columns else "method"
@@ -168,9 +186,10 @@ def compare_methods(frame: pd.DataFrame, reference: str = PAIR_REFERENCE) -> pd.
     names = dict(zip(frame[key], frame["variant_name"] if "variant_name" in frame.columns else frame[key].map(method_display)))
     others = frame[frame["method"] != reference]
     pairs = [(str(base[key].iloc[0]), variant) for variant in dict.fromkeys(others[key])]
-    for _, variants in others.groupby("method", sort=False)[key]:
-        first, *later = dict.fromkeys(variants)
-        pairs += [(first, variant) for variant in later]
+    for _, rows in others.groupby("method", sort=False):
+        if rows[key].nunique() > 1:
+            first = setting_reference(rows, key)
+            pairs += [(first, variant) for variant in dict.fromkeys(rows[key]) if variant != first]
     tables = []
     for before, after in pairs:
         try:
@@ -206,32 +225,32 @@ def _method_name(row: pd.Series, column: str = "method") -> str:
     return str(name) if isinstance(name, str) and name else method_display(str(row[column]))
 
 
-def paired_methods_markdown(table: pd.DataFrame) -> tuple[list[str], list[list[str]], str]:
+def paired_methods_markdown(table: pd.DataFrame, reference: str = PAIR_REFERENCE) -> tuple[list[str], list[list[str]], str]:
     """(header, rows, caption) of `compare_methods`'s table: per method, the reference's count →
     the method's on the same episodes, the discordant pairs and the sign test. With more than one
-    reference (a method's variants paired with each other too) the rows name theirs."""
+    reference (a method's settings paired with each other too) the rows name theirs."""
     outcomes = _held_outcomes(table)
     several = table["reference"].nunique() > 1
     head = ["Method"] + (["Against"] if several else []) + ["Paired episodes"] + [PAIRED_OUTCOMES[o] for o in outcomes]
     rows = [[_method_name(row)] + ([_method_name(row, "reference")] if several else []) + [str(row["paired"])]
             + [paired_cell(row, o) for o in outcomes] for _, row in table.iterrows()]
-    reference = _method_name(table.iloc[0], "reference")
-    first, other = (("the reference", "the method") if several else (reference, "the method"))
-    caption = (f"Episodes with each outcome, {first} → {other}, on the episodes both ran (same food, level, trial "
-               f"and seed); (−a +b): episodes that had it only with {first}, only with {other}; p: exact two-sided "
+    first = "the reference" if several else _method_name(table.iloc[0], "reference")
+    caption = (f"Episodes with each outcome, {first} → the method, on the episodes both ran (same food, level, trial "
+               f"and seed); (−a +b): episodes that had it only with {first}, only with the method; p: exact two-sided "
                "sign test (McNemar's exact test) on those. Episodes with an error in either are left out.")
     if several:
-        caption += (f" Against: {reference} for every method, and a method's first setting in the records for its "
-                    "other settings.")
+        caption += (f" Against: {method_display(reference)} for every method, and for" if (table["reference"] == reference).any()
+                    else " Against: for") + (" a method at several settings, its setting at the paper's values (rho 2.5, "
+                                             "s 30), else its lowest rho, for the others.")
     return head, rows, caption
 
 
 def paired_methods_table(episodes: pd.DataFrame | None, reference: str = PAIR_REFERENCE) -> ReportTable | None:
-    """The report's "Paired on the same episodes" table, or None when `compare_methods` pairs nothing."""
+    """The report's paired table (`paired_section_title`), or None when `compare_methods` pairs nothing."""
     table = compare_methods(episodes, reference) if episodes is not None else pd.DataFrame()
     if table.empty:
         return None
-    head, rows, caption = paired_methods_markdown(table)
+    head, rows, caption = paired_methods_markdown(table, reference)
     return ReportTable("paired_methods", f"{paired_section_title(table)}: the same episodes, outcome by outcome",
                        caption, pd.DataFrame(rows, columns=head), table)
 

@@ -5,7 +5,8 @@
     summary.csv       one row per method and outcome: k, n, rate, Wilson 95 % bounds (OUTCOMES)
     stage_cause.csv   one row per method, stage and cause: episodes with such a spill, particles
     claims.csv        the paper's claims beside these records (the report's claims table), when they hold its methods
-    paired.csv        every method against Diffusion Policy on the episodes both ran (run_compare.compare_methods)
+    paired.csv        every method against Diffusion Policy on the episodes both ran, and a method's settings
+                      against its reference setting (run_compare.compare_methods)
     reference.csv     a sweep's trials against its reference methods on the same episodes (the sweep's own file)
     provenance.json   protocol, commits, machine, dates, wall time, checkpoint digests, episodes per method
     config.yaml       the run's config as it ran (RUN_DIR/config.yaml)

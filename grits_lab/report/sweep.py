@@ -19,7 +19,7 @@ from typing import Any
 import pandas as pd
 from grits_lab.report.run_compare import PAIRED_OUTCOMES, paired_cell
 from grits_lab.report.tables import ReportTable
-from grits_lab.report.vocabulary import MISSING, method_display
+from grits_lab.report.vocabulary import MISSING, PAPER_DEFAULTS, method_display
 
 PARAMETERS = ("rho", "s")
 # The paper's trade-off: at most one success column (maximized) and one spillage column (minimized).
@@ -30,7 +30,6 @@ NAMED_OBJECTIVES = (
 # Shown beside the objectives when the trials table has them (grits_lab/tune writes these).
 CONTEXT_COLUMNS = ("scoop_failure_rate", "n_episodes", "n_errors", "feasible")
 COMPLETE_STATES = {"COMPLETE", "TRIALSTATE.COMPLETE"}
-PAPER_DEFAULTS = {"rho": 2.5, "s": 30}
 
 
 @dataclass

@@ -190,7 +190,7 @@ def test_a_per_food_block_counts_each_methods_outcomes_food_by_food_without_erro
             ("dp", "sago", 0, "spill", {"spilled_scoop_over_rim": 2}, ""), ("dp", "sago", 1, "success", {}, ""),
             ("dp", "red_bean", 0, "transfer_fail", {"spilled_carry_off_spoon": 3}, ""),
             ("grits", "sago", 0, "success", {}, ""), ("grits", "sago", 1, "success", {}, ""),
-            ("grits", "red_bean", 0, "success", {}, "boom")):
+            ("grits", "red_bean", 0, "success", {}, "boom"), ("rule_based", "sago", 0, "success", {}, "boom")):
         row = episode(method, food, "brim", trial, outcome, error=error)
         row.update({c: 0 for c in attribution_columns()}, **lost)
         rows.append(row)
@@ -202,7 +202,9 @@ def test_a_per_food_block_counts_each_methods_outcomes_food_by_food_without_erro
     (folder / "README.md").write_text("# Foods\n\n<!-- generated: per_food foods -->\n<!-- end generated -->\n")
     page = render_all(tmp_path)[folder / "README.md"]
     scoop, before_pour, success = page.split("*Spill during the scoop*")[1], page.split("*Spill before the pour*")[1], page.split("*Task success*")[1]
-    assert "| SA sago | 1/2 | 0/2 |" in scoop and "| RB red bean | 0/1 | — |" in scoop  # the errored episode is left out
-    assert "| RB red bean | 1/1 | — |" in before_pour and "| Every food | 2/3 | 0/2 |" in before_pour
-    assert "| SA sago | 1/2 | 2/2 |" in success
+    assert "| RB red bean | — | 0/1 | — |" in scoop  # the errored episode is left out
+    assert "| RB red bean | — | 1/1 | — |" in before_pour and "| Every food | — | 2/3 | 0/2 |" in before_pour
+    assert "| SA sago | — | 1/2 | 2/2 |" in success
     assert scoop.index("SA sago") < scoop.index("RB red bean")  # the paper's food order
+    # A method whose every episode ended with an error keeps its column, in the outcomes block's order.
+    assert "| Food | Rule-based | Diffusion Policy | GRITS |" in scoop and "| SA sago | — | 1/2 | 0/2 |" in scoop

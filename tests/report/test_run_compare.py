@@ -160,21 +160,25 @@ def test_a_method_at_two_guidance_settings_is_paired_with_dp_once_per_setting_an
     tuned, paper = with_dp.loc["GRITS (rho=0.07, s=78)"], with_dp.loc["GRITS (rho=2.5, s=30)"]
     assert (tuned["paired"], tuned["spillage_before"], tuned["spillage_after"], tuned["spillage_only_before"]) == (3, 2, 1, 1)
     assert (paper["scoop_failure_before"], paper["scoop_failure_after"], paper["task_success_after"]) == (0, 2, 0)
-    # The later setting against the first in the records, on the same seeds: success 2 -> 0, scoop failure 0 -> 2.
+    # The tuned setting against the paper's values on the same seeds, whatever order the records come in:
+    # success 0 -> 2, scoop failure 2 -> 0.
     between = table[table["reference"] != "dp"]
     assert len(between) == 1
     row = between.iloc[0]
-    assert (row["reference_name"], row["method_name"], row["paired"]) == ("GRITS (rho=0.07, s=78)", "GRITS (rho=2.5, s=30)", 3)
-    assert (row["task_success_before"], row["task_success_after"], row["task_success_only_before"]) == (2, 0, 2)
-    assert (row["scoop_failure_before"], row["scoop_failure_after"], row["spillage_before"], row["spillage_after"]) == (0, 2, 1, 1)
+    assert (row["reference_name"], row["method_name"], row["paired"]) == ("GRITS (rho=2.5, s=30)", "GRITS (rho=0.07, s=78)", 3)
+    assert (row["task_success_before"], row["task_success_after"], row["task_success_only_after"]) == (0, 2, 2)
+    assert (row["scoop_failure_before"], row["scoop_failure_after"], row["spillage_before"], row["spillage_after"]) == (2, 0, 1, 1)
+    reversed_records = load_run(run).episodes.iloc[::-1].reset_index(drop=True)
+    again = compare_methods(reversed_records)
+    assert again[again["reference"] != "dp"].iloc[0]["reference_name"] == "GRITS (rho=2.5, s=30)"
     folder = tmp_path / "docs" / "experiments" / "pair"
     write_summary(load_run(run), folder, "grits-lab report run --summary-to docs/experiments/pair")
     (folder / "README.md").write_text("# Pair\n\n<!-- generated: paired pair -->\n<!-- end generated -->\n")
     page = render_all(tmp_path)[folder / "README.md"]
     assert "| GRITS (rho=0.07, s=78) | Diffusion Policy | 3 | 1 → 2 (−0 +1, p 1) | 2 → 1 (−1 +0, p 1) |" in page
     assert "| GRITS (rho=2.5, s=30) | Diffusion Policy | 3 |" in page
-    assert "| GRITS (rho=2.5, s=30) | GRITS (rho=0.07, s=78) | 3 | 2 → 0 (−2 +0, p 0.5) |" in page
-    assert "a method's first setting in the records for its other settings" in page
+    assert "| GRITS (rho=0.07, s=78) | GRITS (rho=2.5, s=30) | 3 | 0 → 2 (−0 +2, p 0.5) |" in page
+    assert "its setting at the paper's values (rho 2.5, s 30)" in page
     build_report(run, tmp_path / "report")
     assert "## Paired with each other" in (tmp_path / "report" / "report.md").read_text()
 
