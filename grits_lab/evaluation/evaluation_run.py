@@ -250,22 +250,30 @@ def _present(value: Any) -> bool:
     return value is not None and not (isinstance(value, float) and math.isnan(value))
 
 
-def _earlier_methods(out: Path, recorded_methods: list[str]) -> dict[str, Any]:
-    """The provenance entries of methods already in the records, as an earlier run wrote them."""
+def _earlier_run(out: Path, recorded_methods: list[str]) -> tuple[dict[str, Any], str | None]:
+    """The provenance entries of methods already in the records, as an earlier run wrote them, and when
+    the first run into the directory started (None without records or an earlier provenance.json)."""
     import json
 
     try:
-        earlier = json.loads((out / "provenance.json").read_text()).get("methods", {})
-    except (OSError, ValueError, AttributeError):
-        return {}
-    return {m: earlier[m] for m in recorded_methods if isinstance(earlier, dict) and m in earlier}
+        earlier = json.loads((out / "provenance.json").read_text())
+    except (OSError, ValueError):
+        return {}, None
+    methods = earlier.get("methods", {}) if isinstance(earlier, dict) else {}
+    started = earlier.get("started (UTC)") if isinstance(earlier, dict) and recorded_methods else None
+    return ({m: methods[m] for m in recorded_methods if isinstance(methods, dict) and m in methods},
+            started if isinstance(started, str) else None)
 
 
 def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], digests: dict[str, str], n_episodes: int,
-               earlier: dict[str, Any] | None = None) -> dict[str, Any]:
+               earlier: dict[str, Any] | None = None, first_started: str | None = None) -> dict[str, Any]:
     """What produced the records; `earlier`: entries of methods recorded by earlier runs into the same
-    directory, kept (under the current entry where this run evaluates the method again)."""
+    directory, kept (under the current entry where this run evaluates the method again);
+    `first_started`: when the first of those runs started, kept as the directory's "started (UTC)".
+    Each method evaluated now records when and at which code commit this run started it."""
     from grits_lab.versions import cpu_kernels, cpu_model, git_commit, package_versions
+
+    now, commit = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S"), git_commit()
 
     # what a file digest cannot tell: whether two checkpoints on other paths hold the same model
     # (the training kernels only where the checkpoint recorded them)
@@ -274,13 +282,14 @@ def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], diges
     return {
         "run_id": config.run_id,
         "protocol": PROTOCOL,
-        "started (UTC)": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S"),
-        "code git commit": git_commit(),
+        "started (UTC)": first_started or now,
+        "code git commit": commit,  # the latest run's; each method's own is under "methods"
         "config fingerprint": config_fingerprint(config),
         "methods": {**(earlier or {}),
                     **{m: {"description": method_spec(m, config).description,
                            "checkpoints": {k: {"path": p, "sha256_16": digests[p], **identity[p]} for k, p in paths[m].items()},
-                           "rho_s": list(guidance_columns(m, config))} for m in config.methods}},
+                           "rho_s": list(guidance_columns(m, config)),
+                           "started (UTC)": now, "code git commit": commit} for m in config.methods}},
         "guidance": config_to_dict(config.guidance),
         "posthoc": config_to_dict(config.posthoc),
         "root seed": config.seed,
@@ -323,7 +332,8 @@ def _evaluate_in(out: Path, config: EvaluationConfig, specs: list[EpisodeSpec], 
     known = {*METHODS, *registered_methods(config.custom_methods)}  # a lab's method no longer registered stays in provenance.json
     described = replace(config, methods=list(dict.fromkeys([*(m for m in recorded_methods if m in known), *config.methods])))
     write_text_atomic(out / "config.yaml", yaml.safe_dump(config_to_dict(described), sort_keys=False))
-    write_json_atomic(out / "provenance.json", provenance(config, paths, digests, len(specs), earlier=_earlier_methods(out, recorded_methods)))
+    earlier, first_started = _earlier_run(out, recorded_methods)
+    write_json_atomic(out / "provenance.json", provenance(config, paths, digests, len(specs), earlier=earlier, first_started=first_started))
     if restart and records_path.exists():
         records_path.unlink()
     finished = {identity_of(r) for r in done}

@@ -68,6 +68,23 @@ def test_records_of_earlier_invocations_stay_described(models, tmp_path):
     assert provenance["methods"]["dp"]["checkpoints"]["policy"]["path"] == models["policy"]
 
 
+def test_the_directory_keeps_when_its_first_run_started_and_each_method_when_its_own_did(models, tmp_path):
+    run_dir = tmp_path / "run"
+    evaluate(eval_config(models, run_dir, methods=["rule_based"]), progress=False)
+    first = json.loads((run_dir / "provenance.json").read_text())
+    path = run_dir / "provenance.json"
+    path.write_text(json.dumps({**first, "started (UTC)": "2026-01-02 03:04:05",
+                                "methods": {"rule_based": {**first["methods"]["rule_based"], "started (UTC)": "2026-01-02 03:04:05"}}}))
+    evaluate(eval_config(models, run_dir, methods=["dp"]), progress=False)
+    provenance = json.loads(path.read_text())
+    assert provenance["started (UTC)"] == "2026-01-02 03:04:05"  # the first run's, not this one's
+    assert provenance["methods"]["rule_based"]["started (UTC)"] == "2026-01-02 03:04:05"
+    assert provenance["methods"]["dp"]["started (UTC)"] > "2026-01-02 03:04:05"
+    assert provenance["methods"]["dp"]["code git commit"] == provenance["code git commit"]
+    evaluate(eval_config(models, run_dir, methods=["dp"]), progress=False, restart=True)  # nothing kept: a fresh start
+    assert json.loads(path.read_text())["started (UTC)"] > "2026-01-02 03:04:05"
+
+
 def test_a_changed_checkpoint_is_refused_not_resumed_and_restart_starts_over(models, tmp_path):
     run_dir = tmp_path / "run"
     evaluate(eval_config(models, run_dir, methods=["dp"]), progress=False)
