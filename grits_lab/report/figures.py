@@ -21,14 +21,15 @@ from grits_lab.intervals import percent_digits  # noqa: E402
 from grits_lab.io import atomic_path  # noqa: E402
 from grits_lab.records import OUTCOME_COLUMNS  # noqa: E402
 from grits_lab.report.sweep import SweepSummary  # noqa: E402
-from grits_lab.report.vocabulary import PAPER_DEFAULTS  # noqa: E402
 from grits_lab.report.tables import PER_FOOD_CATEGORIES, PER_FOOD_CATEGORY_NAMES  # noqa: E402
 from grits_lab.report.vocabulary import (  # noqa: E402
     FOOD_ABBREVIATIONS,
     METHOD_NAMES,
     OUTCOME_NAMES,
+    PAPER_DEFAULTS,
     PAPER_LABEL,
     SIM_LABEL,
+    at_paper_defaults,
     food_display,
 )
 
@@ -229,7 +230,7 @@ def sweep_front(summary: SweepSummary, path: Path) -> Path | None:
 def _paper_default(complete: pd.DataFrame) -> pd.Series | None:
     if not {"rho", "s"} <= set(complete.columns):
         return None
-    hit = complete[np.isclose(complete["rho"].astype(float), PAPER_DEFAULTS["rho"]) & (complete["s"] == PAPER_DEFAULTS["s"])]
+    hit = complete[at_paper_defaults(complete["rho"], complete["s"])]
     return hit.iloc[0] if len(hit) else None
 
 

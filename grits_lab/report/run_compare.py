@@ -29,7 +29,7 @@ from grits_lab.report.run_records import load_run
 from grits_lab.report.spill_tables import (delivered_share, has_attribution, lifted_episodes, spilled_after_scoop,
                                            spilled_before_pour)
 from grits_lab.report.tables import ReportTable
-from grits_lab.report.vocabulary import PAPER_DEFAULTS, method_display
+from grits_lab.report.vocabulary import PAPER_DEFAULTS, at_paper_defaults, method_display
 
 PAIR_KEYS = ("method", "food", "level", "trial")
 OFFSET_COLUMN = "scoop_action_offset_m"  # `scoop.action_offset` of the run (docs/evaluation.md, "Outcome sensitivity")
@@ -154,10 +154,7 @@ def setting_reference(rows: pd.DataFrame, key: str = "variant") -> str:
     digest breaking ties; the same whatever order the records come in (a page's episodes.csv is sorted)."""
     columns = [c for c in ("rho", "s", "checkpoint_predictor") if c in rows.columns]
     settings = rows.drop_duplicates(key)[[key, *columns]].copy()
-    settings["_paper"] = False
-    if {"rho", "s"} <= set(columns):
-        rho = pd.to_numeric(settings["rho"], errors="coerce")
-        settings["_paper"] = ((rho - PAPER_DEFAULTS["rho"]).abs() < 1e-9) & (settings["s"] == PAPER_DEFAULTS["s"])
+    settings["_paper"] = at_paper_defaults(settings["rho"], settings["s"]) if {"rho", "s"} <= set(columns) else False
     if "checkpoint_predictor" in columns:
         settings["checkpoint_predictor"] = settings["checkpoint_predictor"].astype(str)
     settings = settings.sort_values(["_paper", *columns, key], ascending=[False] + [True] * (len(columns) + 1), na_position="last")
@@ -240,8 +237,8 @@ def paired_methods_markdown(table: pd.DataFrame, reference: str = PAIR_REFERENCE
                "sign test (McNemar's exact test) on those. Episodes with an error in either are left out.")
     if several:
         caption += (f" Against: {method_display(reference)} for every method, and for" if (table["reference"] == reference).any()
-                    else " Against: for") + (" a method at several settings, its setting at the paper's values (rho 2.5, "
-                                             "s 30), else its lowest rho, for the others.")
+                    else " Against: for") + (" a method at several settings, its setting at the paper's values (rho "
+                                             f"{PAPER_DEFAULTS['rho']}, s {PAPER_DEFAULTS['s']}), else its lowest rho, for the others.")
     return head, rows, caption
 
 

@@ -25,6 +25,14 @@ METHOD_NAMES: dict[str, str] = {
 # The paper's guidance weight and threshold (SPEC), the setting tuned points are measured against.
 PAPER_DEFAULTS = {"rho": 2.5, "s": 30}
 
+
+def at_paper_defaults(rho: "pd.Series", s: "pd.Series") -> "pd.Series":
+    """Per row: is (rho, s) the paper's setting (`PAPER_DEFAULTS`; rho compared with np.isclose)."""
+    import numpy as np
+    import pandas as pd
+
+    return pd.Series(np.isclose(pd.to_numeric(rho, errors="coerce"), PAPER_DEFAULTS["rho"]), index=rho.index) & (s == PAPER_DEFAULTS["s"])
+
 # Paper Fig. 5 compares these methods, in this order.
 MAIN_METHODS = ("rule_based", "bc", "scone", "dp", "dp_post", "grits")
 # Paper Fig. 8: the predictor ablation, weakest variant first as in the paper's caption.
