@@ -42,6 +42,10 @@ OUTCOME_COLUMNS = ("task_success", "spillage", "scoop_failure")
 # The record column naming the SIMD kernels its episode ran on (grits_lab/versions.py `cpu_kernels`);
 # dataset episodes and checkpoints carry a key of the same name. Records from before it lack it.
 CPU_KERNELS = "cpu_kernels"
+# The record column naming the code its episode ran: the driver's `git_commit()` (grits_lab/versions.py)
+# when the run that played it started, `<sha>` or `<sha> (with uncommitted changes)`. One run directory
+# may hold episodes of several invocations at several commits. Records from before it lack it.
+CODE_COMMIT = "code_commit"
 # Where the lifted load (the particles `scooped` counts) was at the episode's end, each counted once:
 # in the target bowl, still in the spoon, back in the source bowl, counted spilled, anywhere else;
 # the five sum to `scooped` (grits_lab/evaluation/task_episode.py `load_account`). Records from

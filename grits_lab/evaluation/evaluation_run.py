@@ -37,7 +37,7 @@ from grits_lab.evaluation.methods import (
     checkpoint_identity,
 )
 from grits_lab.io import ensure_writable_dir, exclusive_directory, save_parquet_atomic, write_json_atomic, write_text_atomic
-from grits_lab.records import CPU_KERNELS, RECORD_COLUMNS, with_protocol
+from grits_lab.records import CODE_COMMIT, CPU_KERNELS, RECORD_COLUMNS, with_protocol
 from grits_lab.runners import EpisodeResult, EpisodeSpec, make_executor
 from grits_lab.runners.base import Executor
 from grits_lab.runners.executor_config import check_reachable, cluster_address
@@ -109,11 +109,12 @@ def failed_episode_record(spec: EpisodeSpec, error: str, wall_time_s: float) -> 
     }
 
 
-def result_record(result: EpisodeResult) -> dict[str, Any]:
-    """The episode's record, stamped with the task protocol this code runs (grits_lab/versions.py)."""
+def result_record(result: EpisodeResult, code_commit: str | None = None) -> dict[str, Any]:
+    """The episode's record, stamped with the task protocol this code runs (grits_lab/versions.py) and,
+    where given, the driver's code commit (`code_commit`, grits_lab/records.py)."""
     assert result.spec is not None
     record = dict(result.payload) if result.ok else failed_episode_record(result.spec, result.error, result.wall_time_s)
-    return {**record, "protocol": PROTOCOL}
+    return {**record, "protocol": PROTOCOL, **({CODE_COMMIT: code_commit} if code_commit is not None else {})}
 
 
 def records_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
@@ -157,13 +158,17 @@ def write_rollout_chunks(out: Path, record: dict[str, Any], episode: dict[str, A
 def run_specs(specs: list[EpisodeSpec], executor: Executor, progress: bool = True, done: list[dict[str, Any]] | None = None,
               on_flush: Any = None, flush_every: int = 4, desc: str = "evaluate", on_chunks: Any = None) -> list[dict[str, Any]]:
     """Run specs on `executor`; `on_flush(rows)` is called every `flush_every` results and at the end;
-    `on_chunks(record, episode)` receives each record's rollout chunks (dropped from the record)."""
+    `on_chunks(record, episode)` receives each record's rollout chunks (dropped from the record).
+    Each new record names the code commit this driver runs (`code_commit`)."""
+    from grits_lab.versions import git_commit
+
     rows = list(done or [])
+    commit = git_commit()
     bar = tqdm(total=len(specs), desc=desc, disable=not progress, dynamic_ncols=True)
     since = 0
     try:
         for result in executor.map_unordered(specs):
-            record = result_record(result)
+            record = result_record(result, commit)
             chunks = record.pop("_chunks", None)
             if chunks is not None and on_chunks is not None:
                 on_chunks(record, chunks)

@@ -256,13 +256,16 @@ def provenance_block(root: Path, name: str, here: Path) -> str:
     machine = p.get("machine", {})
     packages = machine.get("packages", {})
     shown = ", ".join(f"{k} {packages[k]}" for k in ("python", "torch", "numpy", "pybullet") if k in packages)
-    records_commit = p.get("records' code commit")
+    # the commits the records name (several where runs at several commits joined), else the run's provenance
+    named = sorted({c for method in p.get("methods", {}).values() for c in method.get("code commits", [])})
+    latest = p.get("records' code commit")
+    records_commit = ", ".join(f"`{_short_commit(c)}`" for c in named) or (f"`{latest}`" if latest else None)
     kernels = machine.get("cpu kernels (episodes)", {})
     cpu = (f"; CPU {machine['cpu']}" if machine.get("cpu") else "") + (
         "; CPU kernels " + ", ".join(f"`{k}` ({n} episode{'' if n == 1 else 's'})" for k, n in kernels.items()) if kernels else "")
     started, host = p.get("run started (UTC)"), machine.get("host")
     lines = [
-        f"- Protocol: {', '.join(p.get('protocol', [])) or 'not recorded'}; records' code: {_recorded(records_commit, f'`{records_commit}`')}.",
+        f"- Protocol: {', '.join(p.get('protocol', [])) or 'not recorded'}; records' code: {_recorded(records_commit, str(records_commit))}.",
         f"- Machine: host {_recorded(host, f'`{host}`')}{'; ' + shown if shown else ''}{cpu}; "
         f"run started {_recorded(started, f'{started} UTC')}.",
         f"- Episode wall time, summed: {_duration(p.get('episode wall time (s, summed)'))}.",
@@ -270,11 +273,22 @@ def provenance_block(root: Path, name: str, here: Path) -> str:
     for method in p.get("methods", {}).values():
         digests = "; ".join(f"{key} `{', '.join(values)}`" for key, values in method.get("checkpoint digests (sha256, first 16)", {}).items())
         trials = method.get("trials", [])
+        commits = ", ".join(f"`{_short_commit(c)}`" for c in method.get("code commits", []))
         lines.append(f"- {method['name']}: {method['episodes']} episodes, {method['foods']} foods, levels {', '.join(method['levels'])}, "
-                     f"trials {_span(trials)}" + (f"; checkpoints {digests}" if digests else "") + ".")
+                     f"trials {_span(trials)}" + (f"; checkpoints {digests}" if digests else "")
+                     + (f"; code {commits}" if commits else "") + ".")
     commit = p.get("summary code commit")
     lines.append(f"- Summary written by `{p.get('command')}` (code {_recorded(commit, f'`{commit}`')}).")
     return "\n".join(lines)
+
+
+def _short_commit(commit: str) -> str:
+    """A commit as the page names it: the sha's first 12 characters, with any suffix the record kept
+    ("(with uncommitted changes)"); "unknown ..." as recorded."""
+    sha, _, rest = commit.partition(" ")
+    if len(sha) == 40 and all(c in "0123456789abcdef" for c in sha):
+        return sha[:12] + (f" {rest}" if rest else "")
+    return commit
 
 
 def _recorded(value: object, shown: str) -> str:

@@ -31,7 +31,7 @@ import pandas as pd
 
 from grits_lab.intervals import rate
 from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
-from grits_lab.records import CPU_KERNELS, OUTCOME_COLUMNS
+from grits_lab.records import CODE_COMMIT, CPU_KERNELS, OUTCOME_COLUMNS
 from grits_lab.report.run_compare import PAIRED_METHODS_FILE, compare_methods
 from grits_lab.report.run_records import SWEEP_REFERENCE_FILE, RunData
 from grits_lab.report.spill_tables import (AFTER_SCOOP, DELIVERED_SHARE, delivered_share, has_attribution,
@@ -125,6 +125,14 @@ def _weights_digests(runs: dict[str, Any], variant: str) -> dict[str, Any]:
         {"trained on cpu kernels": trained} if trained else {})
 
 
+def _code_commits(group: pd.DataFrame) -> dict[str, Any]:
+    """{"code commits": [commit, ...]}: the commits the records of one method name (`code_commit`,
+    grits_lab/records.py), sorted; {} where none does (records from before the column)."""
+    if CODE_COMMIT not in group or not group[CODE_COMMIT].notna().any():
+        return {}
+    return {"code commits": sorted(map(str, group[CODE_COMMIT].dropna().unique()))}
+
+
 def _machine(runs: dict[str, Any], episodes: pd.DataFrame) -> dict[str, Any]:
     """Host, CPU and packages from provenance.json, and episodes per CPU-kernel label from the records
     (`cpu_kernels`, grits_lab/versions.py); the CPU entries only where the run recorded them."""
@@ -166,6 +174,7 @@ def summary_provenance(run: RunData, command: str) -> dict[str, Any]:
             "levels": sorted(map(str, group["level"].unique())),
             "checkpoint digests (sha256, first 16)": digests,
             **_weights_digests(runs, variant),
+            **_code_commits(group),
             "episode wall time (s, summed)": round(float(pd.to_numeric(group.get("wall_time_s"), errors="coerce").sum()), 1)
             if "wall_time_s" in group else None,
         }

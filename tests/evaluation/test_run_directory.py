@@ -75,12 +75,14 @@ def test_the_directory_keeps_when_its_first_run_started_and_each_method_when_its
     path = run_dir / "provenance.json"
     path.write_text(json.dumps({**first, "started (UTC)": "2026-01-02 03:04:05",
                                 "methods": {"rule_based": {**first["methods"]["rule_based"], "started (UTC)": "2026-01-02 03:04:05"}}}))
-    evaluate(eval_config(models, run_dir, methods=["dp"]), progress=False)
+    records = evaluate(eval_config(models, run_dir, methods=["dp"]), progress=False)
     provenance = json.loads(path.read_text())
     assert provenance["started (UTC)"] == "2026-01-02 03:04:05"  # the first run's, not this one's
     assert provenance["methods"]["rule_based"]["started (UTC)"] == "2026-01-02 03:04:05"
     assert provenance["methods"]["dp"]["started (UTC)"] > "2026-01-02 03:04:05"
     assert provenance["methods"]["dp"]["code git commit"] == provenance["code git commit"]
+    # each record names the code that played it, so records joined from several runs keep theirs
+    assert set(records.loc[records["method"] == "dp", "code_commit"]) == {provenance["code git commit"]}
     evaluate(eval_config(models, run_dir, methods=["dp"]), progress=False, restart=True)  # nothing kept: a fresh start
     assert json.loads(path.read_text())["started (UTC)"] > "2026-01-02 03:04:05"
 

@@ -208,3 +208,27 @@ def test_a_per_food_block_counts_each_methods_outcomes_food_by_food_without_erro
     assert scoop.index("SA sago") < scoop.index("RB red bean")  # the paper's food order
     # A method whose every episode ended with an error keeps its column, in the outcomes block's order.
     assert "| Food | Rule-based | Diffusion Policy | GRITS |" in scoop and "| SA sago | — | 1/2 | 0/2 |" in scoop
+
+
+def test_the_page_names_the_code_each_methods_records_ran_not_only_the_latest_runs(tmp_path):
+    run = _records(tmp_path)
+    frame = pd.read_parquet(run / "episodes.parquet")
+    first, second = "a" * 40, "b" * 40 + " (with uncommitted changes)"
+    frame["code_commit"] = [first, first, second, None]  # grits's record predates the column
+    frame.to_parquet(run / "episodes.parquet")
+    out = tmp_path / "docs" / "experiments" / "tiny"
+    assert main(["report", str(run), "--output-dir", str(tmp_path / "report"), "--summary-to", str(out)]) == 0
+    methods = json.loads((out / "provenance.json").read_text())["methods"]
+    assert methods["dp"]["code commits"] == [first, second] and "code commits" not in methods["grits"]
+    block = provenance_block(tmp_path, "tiny", out)
+    assert f"records' code: `{'a' * 12}`, `{'b' * 12} (with uncommitted changes)`." in block  # not provenance.json's abc123
+    dp_line = next(line for line in block.splitlines() if line.startswith("- Diffusion Policy"))
+    assert dp_line.endswith(f"; code `{'a' * 12}`, `{'b' * 12} (with uncommitted changes)`.")
+    assert "; code" not in next(line for line in block.splitlines() if line.startswith("- GRITS"))
+
+
+def test_without_commits_in_the_records_the_page_names_the_runs_provenance(tmp_path):
+    run = _records(tmp_path)
+    out = tmp_path / "docs" / "experiments" / "tiny"
+    assert main(["report", str(run), "--output-dir", str(tmp_path / "report"), "--summary-to", str(out)]) == 0
+    assert "records' code: `abc123`." in provenance_block(tmp_path, "tiny", out)
