@@ -82,7 +82,8 @@ def _register_predictor(subparsers: argparse._SubParsersAction) -> None:
         description="Train the spillage predictor on a spillage dataset; a rerun resumes after the last finished epoch.",
     )
     parser.add_argument("config", help="experiment YAML (e.g. experiments/predictor_cpu.yaml)")
-    parser.add_argument("--dataset", help="training dataset directory (overrides data.dataset in the config)")
+    parser.add_argument("--dataset", nargs="+", metavar="DIR",
+                        help="training dataset directory, or several trained on together (overrides data.dataset in the config)")
     parser.add_argument("--output-dir", metavar="DIR", help="where runs are written (overrides output_dir in the config)")
     parser.add_argument("--restart", action="store_true", help="discard the run's checkpoints and start from epoch 1")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar or per-epoch lines")
@@ -101,7 +102,7 @@ def _train_predictor(args: argparse.Namespace) -> int:
 
     config = load_config(args.config, PredictorConfig)
     if args.dataset:
-        config.data.dataset = args.dataset
+        config.data.dataset = args.dataset[0] if len(args.dataset) == 1 else list(args.dataset)
     if args.output_dir:
         config.output_dir = args.output_dir
     if args.eval is None:

@@ -111,6 +111,39 @@ def split_spillage_episodes(index: Any, val_fraction: float, seed: int, holdout_
     return EpisodeSplit(train=train, val=val)
 
 
+def split_training_datasets(dataset_dirs: list[Path], val_fraction: float, seed: int, holdout_shape: str | None = None,
+                            **check: Any) -> tuple[Path, EpisodeSplit]:
+    """The directory a training run's episode files are relative to, and its train/validation split,
+    over one spillage dataset or several (`data.dataset` as a list).
+
+    Each dataset is checked (`check_spillage_dataset(dir, **check)`) and split on its own by
+    `split_spillage_episodes` with the same `val_fraction`, `seed` and `holdout_shape`, so the
+    episodes a dataset holds out are the ones it holds out when trained alone, and a predictor
+    trained on several can be scored on one dataset's validation episodes beside a predictor trained
+    on that dataset only. One dataset: its directory and files relative to it. Several: the current
+    directory and each file prefixed with its dataset's path. Errors name the dataset they concern;
+    a dataset listed twice is an InputError.
+    """
+    if len(dataset_dirs) == 1:
+        check_spillage_dataset(dataset_dirs[0], **check)
+        return dataset_dirs[0], split_spillage_episodes(load_index(dataset_dirs[0]), val_fraction, seed, holdout_shape)
+    seen = [d.resolve() for d in dataset_dirs]
+    twice = next((d for d, r in zip(dataset_dirs, seen) if seen.count(r) > 1), None)
+    if twice is not None:
+        raise InputError(f"`data.dataset` lists {twice} twice; each dataset once")
+    train: list[str] = []
+    val: list[str] = []
+    for d in dataset_dirs:
+        index = check_spillage_dataset(d, **check)
+        try:
+            part = split_spillage_episodes(index, val_fraction, seed, holdout_shape)
+        except InputError as exc:
+            raise InputError(f"{d}: {exc}") from None
+        train += [str(d / f) for f in part.train]
+        val += [str(d / f) for f in part.val]
+    return Path("."), EpisodeSplit(train=train, val=val)
+
+
 def load_chunks(path: Path, cloud_key: str, label_key: str = "chunk_spilled") -> dict[str, np.ndarray]:
     """The arrays one episode contributes, checked for presence and consistent chunk counts;
     "label" is the `label_key` array (chunk_spilled or chunk_spilled_horizon)."""

@@ -9,6 +9,7 @@ commented where they are made.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Literal
 
 from grits_lab.config import require
@@ -102,7 +103,9 @@ class PredictorModelConfig:
 
 @dataclass
 class PredictorDataConfig:
-    dataset: str = "results/datasets/spillage_quick"
+    # A spillage dataset directory, or a list of them trained on together (each split into train and
+    # validation on its own: docs/predictor.md, "Training on several datasets").
+    dataset: str | list[str] = "results/datasets/spillage_quick"
     # What a chunk's label says (docs/predictor.md, "Which label"): "chunk", the paper's, whether the
     # spilled count rose during the chunk's own n_action_steps actions; "horizon", whether food
     # spilled from its first action until the load was delivered (needs a dataset collected with
@@ -123,8 +126,14 @@ class PredictorDataConfig:
     # coordinates relative to its centre divided by 0.1 lie within about [-1, 1].
     cloud_scale: float = 0.1
 
+    @property
+    def dataset_dirs(self) -> list[Path]:
+        """`dataset` as a list of directories (one entry when it names one)."""
+        return [Path(d) for d in (self.dataset if isinstance(self.dataset, list) else [self.dataset])]
+
     def __post_init__(self) -> None:
-        require(bool(self.dataset), "data.dataset", self.dataset, "a dataset directory")
+        listed = self.dataset if isinstance(self.dataset, list) else [self.dataset]
+        require(bool(listed) and all(listed), "data.dataset", self.dataset, "a dataset directory or a non-empty list of them")
         require(self.points_per_object is None or self.points_per_object > 0, "data.points_per_object", self.points_per_object, "positive or null")
         require(0.0 < self.val_fraction < 1.0, "data.val_fraction", self.val_fraction, "in (0, 1)")
         require(self.shuffle_buffer > 0, "data.shuffle_buffer", self.shuffle_buffer, "positive")

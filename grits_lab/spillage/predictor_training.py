@@ -29,7 +29,7 @@ from grits_lab.io import ensure_writable_dir, exclusive_directory, write_json_at
 from grits_lab.seeding import derive_seed
 from grits_lab.spillage.predictor_checkpoint import TrainedPredictor, read_checkpoint, save_predictor
 from grits_lab.spillage.predictor_config import PredictorConfig
-from grits_lab.spillage.chunk_dataset import CLOUD_KEYS, SpillageChunkDataset, check_spillage_dataset, fit_normalizers, split_spillage_episodes
+from grits_lab.spillage.chunk_dataset import CLOUD_KEYS, EpisodeSplit, SpillageChunkDataset, check_spillage_dataset, fit_normalizers, split_training_datasets
 from grits_lab.spillage.classifier_metrics import classification_report
 from grits_lab.training.metrics_log import MetricLogger
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
@@ -92,20 +92,20 @@ def _timed_history(path: Path, history: list[dict[str, Any]]) -> list[dict[str, 
 def train_predictor(config: PredictorConfig, restart: bool = False, progress: bool = True) -> dict[str, Any]:
     """Train (or resume) the run of `config`; returns the best epoch's validation metrics and paths."""
     torch.set_num_threads(config.train.num_threads)
-    index = check_spillage_dataset(Path(config.data.dataset), config.model.n_action_steps, label=config.data.label)
+    data = config.data
+    dataset_dir, split = split_training_datasets(data.dataset_dirs, data.val_fraction, data.split_seed, data.holdout_shape,
+                                                 n_action_steps=config.model.n_action_steps, label=data.label)
     out = ensure_writable_dir(run_dir(config))
     with exclusive_directory(out, "train predictor"):  # one trainer per run: two would overwrite each other's last.pt
-        return _train_in(out, config, index, restart, progress)
+        return _train_in(out, config, dataset_dir, split, restart, progress)
 
 
-def _train_in(out: Path, config: PredictorConfig, index: Any, restart: bool, progress: bool) -> dict[str, Any]:
+def _train_in(out: Path, config: PredictorConfig, dataset_dir: Path, split: EpisodeSplit, restart: bool, progress: bool) -> dict[str, Any]:
     from tqdm import tqdm
 
     fingerprint = _resume_fingerprint(config)
-    dataset_dir = Path(config.data.dataset)
     last_path, best_path = out / "last.pt", out / "best.pt"
     cloud_key = CLOUD_KEYS[config.data.cloud_source]
-    split = split_spillage_episodes(index, config.data.val_fraction, config.data.split_seed, config.data.holdout_shape)
 
     torch.manual_seed(derive_seed(config.train.seed, "predictor-init"))
     model = SpillagePredictor(config.model)

@@ -341,3 +341,45 @@ def test_cli_scores_either_label_and_compare_needs_one_when_predictors_differ(tm
     assert main(["compare-predictors", *paths, "--eval", str(tiny_horizon_dataset), "--bootstrap", "100", "--label", "horizon"]) == 0
     table = json.loads((tmp_path / "runs" / "comparison_tiny_horizon_horizon" / "predictor_comparison.json").read_text())
     assert table["label"] == "horizon" and [m["model"] for m in table["models"]] == ["h", "c"]
+
+
+def test_several_datasets_train_together_each_split_as_when_trained_alone(tmp_path, tiny_dataset, tiny_horizon_dataset):
+    from grits_lab.spillage.chunk_dataset import split_training_datasets
+
+    alone = split_spillage_episodes(load_index(tiny_horizon_dataset), 0.25, seed=0)
+    root, both = split_training_datasets([tiny_dataset, tiny_horizon_dataset], 0.25, seed=0)
+    assert root == Path(".")
+    assert [f for f in both.val if f.startswith(str(tiny_horizon_dataset))] == [str(tiny_horizon_dataset / f) for f in alone.val]
+    assert len(both.train) + len(both.val) == len(load_index(tiny_dataset)) + len(load_index(tiny_horizon_dataset))
+    with pytest.raises(InputError, match="twice"):
+        split_training_datasets([tiny_dataset, tiny_dataset], 0.25, seed=0)
+
+    cfg = _config(tmp_path, tiny_dataset, epochs=1)
+    cfg.data.dataset = [str(tiny_dataset), str(tiny_horizon_dataset)]
+    train_predictor(cfg, progress=False)
+    trained = load_predictor(tmp_path / "runs" / "tiny" / "best.pt")
+    assert trained.config.data.dataset == [str(tiny_dataset), str(tiny_horizon_dataset)]
+    history = json.loads((tmp_path / "runs" / "tiny" / "history.json").read_text())
+    from grits_lab.data.format import read_episode
+
+    val_chunks = sum(len(read_episode(Path(f), keys=["chunk_start"])[0]["chunk_start"]) for f in both.val)
+    assert history[0]["val_n"] == val_chunks > 0  # validated on the union of the datasets' held-out episodes
+
+
+def test_cli_trains_on_several_datasets_and_refuses_a_dataset_without_the_label(tmp_path, tiny_dataset, tiny_horizon_dataset, capsys):
+    cfg_path = tmp_path / "p.yaml"
+    cfg_path.write_text(yaml.safe_dump({
+        "name": "two", "output_dir": str(tmp_path / "runs"), "data": {"label": "horizon"},
+        "model": {"dp3": {"hidden_dims": [16], "out_dim": 16}},
+        "train": {"epochs": 1, "batch_size": 16, "num_threads": 1},
+    }))
+    # the first dataset has no horizon labels: refused, naming it, before any epoch
+    assert main(["train", "predictor", str(cfg_path), "--no-progress", "--dataset", str(tiny_dataset), str(tiny_horizon_dataset)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(tiny_dataset) in err[0] and not (tmp_path / "runs" / "two" / "last.pt").exists()
+    second = tmp_path / "second"
+    import shutil
+    shutil.copytree(tiny_horizon_dataset, second)
+    assert main(["train", "predictor", str(cfg_path), "--no-progress", "--dataset", str(tiny_horizon_dataset), str(second)]) == 0
+    stored = yaml.safe_load((tmp_path / "runs" / "two" / "config.yaml").read_text())
+    assert stored["data"]["dataset"] == [str(tiny_horizon_dataset), str(second)]
