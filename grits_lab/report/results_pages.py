@@ -259,7 +259,7 @@ def provenance_block(root: Path, name: str, here: Path) -> str:
     # the commits the records name (several where runs at several commits joined), else the run's provenance
     named = sorted({c for method in p.get("methods", {}).values() for c in method.get("code commits", [])})
     latest = p.get("records' code commit")
-    records_commit = ", ".join(f"`{_short_commit(c)}`" for c in named) or (f"`{latest}`" if latest else None)
+    records_commit = _commit_list(named) or (f"`{latest}`" if latest else None)
     kernels = machine.get("cpu kernels (episodes)", {})
     cpu = (f"; CPU {machine['cpu']}" if machine.get("cpu") else "") + (
         "; CPU kernels " + ", ".join(f"`{k}` ({n} episode{'' if n == 1 else 's'})" for k, n in kernels.items()) if kernels else "")
@@ -273,13 +273,18 @@ def provenance_block(root: Path, name: str, here: Path) -> str:
     for method in p.get("methods", {}).values():
         digests = "; ".join(f"{key} `{', '.join(values)}`" for key, values in method.get("checkpoint digests (sha256, first 16)", {}).items())
         trials = method.get("trials", [])
-        commits = ", ".join(f"`{_short_commit(c)}`" for c in method.get("code commits", []))
+        commits = _commit_list(method.get("code commits", []))
         lines.append(f"- {method['name']}: {method['episodes']} episodes, {method['foods']} foods, levels {', '.join(method['levels'])}, "
                      f"trials {_span(trials)}" + (f"; checkpoints {digests}" if digests else "")
                      + (f"; code {commits}" if commits else "") + ".")
     commit = p.get("summary code commit")
     lines.append(f"- Summary written by `{p.get('command')}` (code {_recorded(commit, f'`{commit}`')}).")
     return "\n".join(lines)
+
+
+def _commit_list(commits: list[str]) -> str:
+    """Commits as the page lists them: each `_short_commit`, in code quotes, comma-separated ("" for none)."""
+    return ", ".join(f"`{_short_commit(c)}`" for c in commits)
 
 
 def _short_commit(commit: str) -> str:
