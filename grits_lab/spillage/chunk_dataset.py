@@ -125,8 +125,8 @@ def split_training_datasets(dataset_dirs: list[Path], val_fraction: float, seed:
     a dataset listed twice is an InputError.
     """
     if len(dataset_dirs) == 1:
-        check_spillage_dataset(dataset_dirs[0], **check)
-        return dataset_dirs[0], split_spillage_episodes(load_index(dataset_dirs[0]), val_fraction, seed, holdout_shape)
+        index = check_spillage_dataset(dataset_dirs[0], **check)
+        return dataset_dirs[0], split_spillage_episodes(index, val_fraction, seed, holdout_shape)
     seen = [d.resolve() for d in dataset_dirs]
     twice = next((d for d, r in zip(dataset_dirs, seen) if seen.count(r) > 1), None)
     if twice is not None:

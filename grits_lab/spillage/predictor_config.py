@@ -126,13 +126,16 @@ class PredictorDataConfig:
     # coordinates relative to its centre divided by 0.1 lie within about [-1, 1].
     cloud_scale: float = 0.1
 
+    def _listed(self) -> list[str]:
+        return self.dataset if isinstance(self.dataset, list) else [self.dataset]
+
     @property
     def dataset_dirs(self) -> list[Path]:
         """`dataset` as a list of directories (one entry when it names one)."""
-        return [Path(d) for d in (self.dataset if isinstance(self.dataset, list) else [self.dataset])]
+        return [Path(d) for d in self._listed()]
 
     def __post_init__(self) -> None:
-        listed = self.dataset if isinstance(self.dataset, list) else [self.dataset]
+        listed = self._listed()
         require(bool(listed) and all(listed), "data.dataset", self.dataset, "a dataset directory or a non-empty list of them")
         require(self.points_per_object is None or self.points_per_object > 0, "data.points_per_object", self.points_per_object, "positive or null")
         require(0.0 < self.val_fraction < 1.0, "data.val_fraction", self.val_fraction, "in (0, 1)")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 
 import pandas as pd
 from pathlib import Path
@@ -14,11 +15,11 @@ import yaml
 
 from grits_lab.cli import main
 from grits_lab.config import config_from_dict, config_to_dict
-from grits_lab.data.format import load_index
+from grits_lab.data.format import load_index, read_episode
 from grits_lab.errors import ConfigError, InputError
 from grits_lab.spillage.predictor_checkpoint import load_predictor
 from grits_lab.spillage.predictor_config import PredictorConfig
-from grits_lab.spillage.chunk_dataset import split_spillage_episodes, trajectory_window
+from grits_lab.spillage.chunk_dataset import split_spillage_episodes, split_training_datasets, trajectory_window
 from grits_lab.spillage.predictor_training import evaluate_predictor, train_predictor
 
 
@@ -137,7 +138,6 @@ def test_cli_trains_evaluates_and_reports_bad_input_in_one_line(tmp_path, tiny_d
 
 
 def test_a_predictor_chunk_length_the_dataset_was_not_collected_with_is_refused_before_training(tmp_path, tiny_dataset):
-    import shutil
 
     dataset = Path(shutil.copytree(tiny_dataset, tmp_path / "d12"))  # collected with chunks of 12
     manifest = yaml.safe_load((dataset / "dataset.yaml").read_text())
@@ -154,7 +154,6 @@ def _retired(source, key, remedy):
 
 
 def test_a_dataset_that_calls_the_chunk_length_chunk_len_is_refused_naming_the_file_and_key(tmp_path, tiny_dataset):
-    import shutil
 
     from grits_lab.data.format import rebuild_index, read_episode, write_episode
 
@@ -204,7 +203,6 @@ def test_a_checkpoint_that_calls_the_chunk_length_chunk_len_is_refused_to_load_a
 
 
 def test_a_non_finite_value_in_the_dataset_is_refused_naming_its_file(tmp_path, tiny_dataset):
-    import shutil
 
     from grits_lab.data.format import read_episode, write_episode
     from grits_lab.errors import StorageError
@@ -344,8 +342,6 @@ def test_cli_scores_either_label_and_compare_needs_one_when_predictors_differ(tm
 
 
 def test_several_datasets_train_together_each_split_as_when_trained_alone(tmp_path, tiny_dataset, tiny_horizon_dataset):
-    from grits_lab.spillage.chunk_dataset import split_training_datasets
-
     alone = split_spillage_episodes(load_index(tiny_horizon_dataset), 0.25, seed=0)
     root, both = split_training_datasets([tiny_dataset, tiny_horizon_dataset], 0.25, seed=0)
     assert root == Path(".")
@@ -360,8 +356,6 @@ def test_several_datasets_train_together_each_split_as_when_trained_alone(tmp_pa
     trained = load_predictor(tmp_path / "runs" / "tiny" / "best.pt")
     assert trained.config.data.dataset == [str(tiny_dataset), str(tiny_horizon_dataset)]
     history = json.loads((tmp_path / "runs" / "tiny" / "history.json").read_text())
-    from grits_lab.data.format import read_episode
-
     val_chunks = sum(len(read_episode(Path(f), keys=["chunk_start"])[0]["chunk_start"]) for f in both.val)
     assert history[0]["val_n"] == val_chunks > 0  # validated on the union of the datasets' held-out episodes
 
@@ -378,7 +372,6 @@ def test_cli_trains_on_several_datasets_and_refuses_a_dataset_without_the_label(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(tiny_dataset) in err[0] and not (tmp_path / "runs" / "two" / "last.pt").exists()
     second = tmp_path / "second"
-    import shutil
     shutil.copytree(tiny_horizon_dataset, second)
     assert main(["train", "predictor", str(cfg_path), "--no-progress", "--dataset", str(tiny_horizon_dataset), str(second)]) == 0
     stored = yaml.safe_load((tmp_path / "runs" / "two" / "config.yaml").read_text())
