@@ -19,7 +19,7 @@ from torch import nn
 from grits_lab.config import config_from_dict, config_to_dict
 from grits_lab.data.normalize import ActionNormalizer, MinMaxNormalizer
 from grits_lab.policies.bc.configuration_bc import BCConfig
-from grits_lab.policies.diffusion.obs_encoders import PointCloudEncoder, RGBDEncoder
+from grits_lab.policies.diffusion.obs_encoders import build_obs_encoder
 from grits_lab.policies.diffusion.modeling_diffusion import DiffusionPolicy, encoder_obs_keys
 
 
@@ -40,17 +40,8 @@ class BCPolicy(nn.Module):
     def __init__(self, config: BCConfig) -> None:
         super().__init__()
         self.config = config
-        enc = config.obs_encoder
         self.obs_encoder: nn.Module | None
-        if enc.kind == "pointcloud":
-            self.obs_encoder = PointCloudEncoder(enc)
-            feature_dim = enc.cloud_steps * enc.feature_dim
-        elif enc.kind == "rgbd":
-            self.obs_encoder = RGBDEncoder(enc)
-            feature_dim = config.n_obs_steps * enc.feature_dim
-        else:
-            self.obs_encoder = None
-            feature_dim = 0
+        self.obs_encoder, feature_dim = build_obs_encoder(config.obs_encoder, config.n_obs_steps)
         width = feature_dim + config.n_obs_steps * config.action_dim
         layers: list[nn.Module] = []
         for hidden in config.hidden:

@@ -23,7 +23,7 @@ from grits_lab.config import config_from_dict, config_to_dict
 from grits_lab.data.normalize import ActionNormalizer, MinMaxNormalizer
 from grits_lab.errors import InputError
 from grits_lab.policies.diffusion.configuration_diffusion import DiffusionPolicyConfig
-from grits_lab.policies.diffusion.obs_encoders import PointCloudEncoder, RGBDEncoder, rgbd_to_unit
+from grits_lab.policies.diffusion.obs_encoders import build_obs_encoder, rgbd_to_unit
 from grits_lab.policies.diffusion.unet import ConditionalUnet1D
 from grits_lab.sampling import DDIMSampler, DDIMScheduler, Objective, Sampler, SampleResult
 
@@ -47,17 +47,8 @@ class DiffusionPolicy(nn.Module):
     def __init__(self, config: DiffusionPolicyConfig) -> None:
         super().__init__()
         self.config = config
-        enc = config.obs_encoder
         self.obs_encoder: nn.Module | None
-        if enc.kind == "pointcloud":
-            self.obs_encoder = PointCloudEncoder(enc)
-            feature_dim = enc.cloud_steps * enc.feature_dim
-        elif enc.kind == "rgbd":
-            self.obs_encoder = RGBDEncoder(enc)
-            feature_dim = config.n_obs_steps * enc.feature_dim
-        else:
-            self.obs_encoder = None
-            feature_dim = 0
+        self.obs_encoder, feature_dim = build_obs_encoder(config.obs_encoder, config.n_obs_steps)
         self.global_cond_dim = feature_dim + config.n_obs_steps * config.action_dim
         u = config.unet
         self.model = ConditionalUnet1D(

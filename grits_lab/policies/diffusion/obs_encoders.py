@@ -127,3 +127,16 @@ def rgbd_to_unit(rgbd: torch.Tensor, depth_max: float) -> torch.Tensor:
     x = rgbd.float()
     depth = x[..., 3:, :, :].clamp(0, depth_max) / depth_max
     return torch.cat([x[..., :3, :, :].clamp(0, 1), depth], dim=-3)
+
+
+def build_obs_encoder(enc: ObsEncoderConfig, n_obs_steps: int) -> tuple[nn.Module | None, int]:
+    """The observation encoder a policy's config names and the width of its features over the history.
+
+    Returns (encoder, feature_dim): a `PointCloudEncoder` reading `enc.cloud_steps` clouds, an
+    `RGBDEncoder` reading `n_obs_steps` images, or (None, 0) for `kind: none` (the spoon pose only).
+    """
+    if enc.kind == "pointcloud":
+        return PointCloudEncoder(enc), enc.cloud_steps * enc.feature_dim
+    if enc.kind == "rgbd":
+        return RGBDEncoder(enc), n_obs_steps * enc.feature_dim
+    return None, 0
