@@ -6,9 +6,10 @@ import os
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
-from grits_lab.data.format import read_episode, rebuild_index, write_episode
+from grits_lab.data.format import load_index, read_episode, rebuild_index, write_episode
 from grits_lab.errors import StorageError
 from grits_lab.geometry import (
     axis_angle_matrix,
@@ -105,6 +106,15 @@ def test_episode_round_trip_and_index(tmp_path):
     index = rebuild_index(tmp_path)
     assert list(index["episode_id"]) == ["ep_000000", "ep_000001"]
     assert not [p for p in (tmp_path / "episodes").iterdir() if p.name.startswith(".")]
+
+
+def test_a_damaged_index_is_rebuilt_from_the_episode_files(tmp_path):
+    write_episode(tmp_path, "ep_a", {"x": np.zeros(3)}, {"food": "sago"})
+    rebuild_index(tmp_path)
+    (tmp_path / "index.parquet").write_bytes(b"not parquet")
+    index = load_index(tmp_path)
+    assert list(index["food"]) == ["sago"]
+    assert list(pd.read_parquet(tmp_path / "index.parquet")["food"]) == ["sago"]  # written again, whole
 
 
 def test_corrupted_episode_is_detected(tmp_path):

@@ -5,6 +5,7 @@ or the spillage predictor (which can also score a checkpoint with --eval)."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -101,8 +102,8 @@ def _train_predictor(args: argparse.Namespace) -> int:
     from grits_lab.spillage.predictor_training import run_dir
 
     config = load_config(args.config, PredictorConfig)
-    if args.dataset:
-        config.data.dataset = args.dataset[0] if len(args.dataset) == 1 else list(args.dataset)
+    if args.dataset:  # replace() checks the flag's values as the config's are checked
+        config.data = dataclasses.replace(config.data, dataset=args.dataset[0] if len(args.dataset) == 1 else list(args.dataset))
     if args.output_dir:
         config.output_dir = args.output_dir
     if args.eval is None:

@@ -132,7 +132,7 @@ def rebuild_index(dataset_dir: str | Path, on_corrupt: str = "raise") -> "Any":
 
 
 def load_index(dataset_dir: str | Path) -> "Any":
-    """The dataset's index; rebuilt from the episode files when missing."""
+    """The dataset's index; rebuilt from the episode files when missing or unreadable."""
     import pandas as pd
 
     path = Path(dataset_dir) / INDEX_FILE
@@ -140,7 +140,10 @@ def load_index(dataset_dir: str | Path) -> "Any":
         raise StorageError(f"dataset directory not found: {dataset_dir}")
     if not path.exists():
         return rebuild_index(dataset_dir)
-    return pd.read_parquet(path)
+    try:
+        return pd.read_parquet(path)
+    except Exception:  # pyarrow raises many types on a damaged file; the index only caches the episodes' meta
+        return rebuild_index(dataset_dir)
 
 
 def _json_default(value: Any) -> Any:

@@ -55,7 +55,11 @@ def check_spillage_dataset(dataset_dir: str | Path, n_action_steps: int | None =
     and that it holds the `label` asked for (ConfigError naming `label_key`).
     A dataset that calls the chunk length `chunk_len` (collected before scoop-v4) is refused naming that key."""
     dataset_dir = Path(dataset_dir)
-    if not (dataset_dir / EPISODE_DIR).is_dir():
+    try:
+        present = (dataset_dir / EPISODE_DIR).is_dir()
+    except OSError as exc:  # a name the file system refuses (too long, ...): is_dir only absorbs "not found"
+        raise StorageError(f"no spillage dataset at {str(dataset_dir)[:80]}: {exc.strerror}") from None
+    if not present:
         raise StorageError(f"no spillage dataset at {dataset_dir} (missing {EPISODE_DIR}/); collect one first")
     manifest_path = dataset_dir / MANIFEST_FILE
     manifest = load_yaml(manifest_path) if manifest_path.exists() else {}
@@ -127,14 +131,16 @@ def split_training_datasets(dataset_dirs: list[Path], val_fraction: float, seed:
     if len(dataset_dirs) == 1:
         index = check_spillage_dataset(dataset_dirs[0], **check)
         return dataset_dirs[0], split_spillage_episodes(index, val_fraction, seed, holdout_shape)
+    indexes = [check_spillage_dataset(d, **check) for d in dataset_dirs]  # each exists: it resolves
     seen = [d.resolve() for d in dataset_dirs]
-    twice = next((d for d, r in zip(dataset_dirs, seen) if seen.count(r) > 1), None)
-    if twice is not None:
-        raise InputError(f"`data.dataset` lists {twice} twice; each dataset once")
+    for i, (again, resolved) in enumerate(zip(dataset_dirs, seen)):
+        if resolved in seen[:i]:
+            first = dataset_dirs[seen.index(resolved)]
+            spelled = "" if str(first) == str(again) else f" (again as {again})"
+            raise InputError(f"`data.dataset` lists {first} twice{spelled}; each dataset once")
     train: list[str] = []
     val: list[str] = []
-    for d in dataset_dirs:
-        index = check_spillage_dataset(d, **check)
+    for d, index in zip(dataset_dirs, indexes):
         try:
             part = split_spillage_episodes(index, val_fraction, seed, holdout_shape)
         except InputError as exc:

@@ -376,3 +376,27 @@ def test_cli_trains_on_several_datasets_and_refuses_a_dataset_without_the_label(
     assert main(["train", "predictor", str(cfg_path), "--no-progress", "--dataset", str(tiny_horizon_dataset), str(second)]) == 0
     stored = yaml.safe_load((tmp_path / "runs" / "two" / "config.yaml").read_text())
     assert stored["data"]["dataset"] == [str(tiny_horizon_dataset), str(second)]
+
+
+def test_cli_refuses_unusable_dataset_paths_in_one_line_before_any_epoch(tmp_path, tiny_dataset, capsys):
+    cfg_path = tmp_path / "p.yaml"
+    cfg_path.write_text(yaml.safe_dump({
+        "name": "bad", "output_dir": str(tmp_path / "runs"), "model": {"dp3": {"hidden_dims": [16], "out_dim": 16}},
+        "train": {"epochs": 1, "batch_size": 16, "num_threads": 1},
+    }))
+    loop = tmp_path / "loop"
+    loop.symlink_to(loop)
+    alias = tmp_path / "alias"
+    alias.symlink_to(tiny_dataset)
+    cases = {
+        "": "`data.dataset` must be",                                  # the flag is checked as the config is
+        "x" * 300: "no spillage dataset at",                            # a name the file system refuses
+        str(loop): "no spillage dataset at",                            # a link to itself
+        str(alias): f"lists {tiny_dataset} twice (again as {alias})",  # one dataset under two names
+    }
+    for second, expected in cases.items():
+        assert main(["train", "predictor", str(cfg_path), "--no-progress", "--dataset", str(tiny_dataset), second]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and expected in err[0], (second[:20], err)
+    assert not (tmp_path / "runs").exists()
+
