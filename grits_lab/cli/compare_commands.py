@@ -1,4 +1,4 @@
-"""`grits-lab compare-predictors CONFIG... --eval DATASET`: held-out table of trained predictors.
+"""`grits-lab compare-predictors CONFIG... --eval DATASET...`: held-out table of trained predictors.
 `grits-lab compare-runs BEFORE AFTER`: two evaluation runs on the same seeds, episode by episode."""
 
 from __future__ import annotations
@@ -12,15 +12,16 @@ from grits_lab.cli.flags import retire
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "compare-predictors",
-        help="score trained spillage predictors on one held-out dataset, with paired bootstrap intervals",
+        help="score trained spillage predictors on held-out datasets, with paired bootstrap intervals",
         description=(
-            "Score the checkpoint of every predictor config on every chunk of DATASET and write a table "
+            "Score the checkpoint of every predictor config on every chunk of DATASET (or of several) and write a table "
             "(AUROC, accuracy, ECE with 95 %% intervals from resampling whole episodes, and each model's "
             "paired difference to the first config), ROC and reliability plots, and the per-chunk predictions."
         ),
     )
     parser.add_argument("configs", nargs="+", metavar="CONFIG", help="predictor configs; the first is the reference")
-    parser.add_argument("--eval", required=True, metavar="DATASET", help="held-out spillage dataset directory")
+    parser.add_argument("--eval", required=True, nargs="+", metavar="DATASET",
+                        help="held-out spillage dataset directory, or several scored as one set (each episode a bootstrap unit)")
     parser.add_argument("--checkpoint", default="best", choices=["best", "last"], help="which checkpoint of each run (default: best)")
     parser.add_argument("--output-dir", metavar="DIR",
                         help="where the runs are and the comparison is written, to OUTPUT_DIR/comparison_<dataset> "
@@ -92,10 +93,10 @@ def _run(args: argparse.Namespace) -> int:
     label = args.label or configs[0].data.label
     predictions = predict_all(checkpoints, args.eval, label=label)
     comparison = compare_predictions(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed, n_bins=configs[0].train.ece_bins, label=label)
-    out = Path(configs[0].output_dir) / f"comparison_{Path(args.eval).name}"
+    out = Path(configs[0].output_dir) / f"comparison_{'+'.join(Path(d).name for d in args.eval)}"
     if label != "chunk":  # scored against another label: its own table, beside the chunk label's
         out = out.with_name(f"{out.name}_{label}")
-    files = write_comparison(comparison, str(args.eval), out)
-    print(comparison_markdown(comparison, str(args.eval)))
+    files = write_comparison(comparison, ", ".join(args.eval), out)
+    print(comparison_markdown(comparison, ", ".join(args.eval)))
     print(f"written: {', '.join(str(f) for f in files)}")
     return 0

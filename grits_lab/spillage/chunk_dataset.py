@@ -115,6 +115,17 @@ def split_spillage_episodes(index: Any, val_fraction: float, seed: int, holdout_
     return EpisodeSplit(train=train, val=val)
 
 
+def refuse_listed_twice(dataset_dirs: list[Path], key: str) -> None:
+    """InputError naming `key` when two entries of `dataset_dirs` are one directory under any
+    spelling (a trailing slash, `./`, a link to it); call it once every entry is known to exist."""
+    seen = [d.resolve() for d in dataset_dirs]
+    for i, (again, resolved) in enumerate(zip(dataset_dirs, seen)):
+        if resolved in seen[:i]:
+            first = dataset_dirs[seen.index(resolved)]
+            spelled = "" if str(first) == str(again) else f" (again as {again})"
+            raise InputError(f"{key} lists {first} twice{spelled}; each dataset once")
+
+
 def split_training_datasets(dataset_dirs: list[Path], val_fraction: float, seed: int, holdout_shape: str | None = None,
                             **check: Any) -> tuple[Path, EpisodeSplit]:
     """The directory a training run's episode files are relative to, and its train/validation split,
@@ -132,12 +143,7 @@ def split_training_datasets(dataset_dirs: list[Path], val_fraction: float, seed:
         index = check_spillage_dataset(dataset_dirs[0], **check)
         return dataset_dirs[0], split_spillage_episodes(index, val_fraction, seed, holdout_shape)
     indexes = [check_spillage_dataset(d, **check) for d in dataset_dirs]  # each exists: it resolves
-    seen = [d.resolve() for d in dataset_dirs]
-    for i, (again, resolved) in enumerate(zip(dataset_dirs, seen)):
-        if resolved in seen[:i]:
-            first = dataset_dirs[seen.index(resolved)]
-            spelled = "" if str(first) == str(again) else f" (again as {again})"
-            raise InputError(f"`data.dataset` lists {first} twice{spelled}; each dataset once")
+    refuse_listed_twice(dataset_dirs, "`data.dataset`")
     train: list[str] = []
     val: list[str] = []
     for d, index in zip(dataset_dirs, indexes):

@@ -86,20 +86,37 @@ def _interval(values: np.ndarray) -> tuple[float, float]:
     return (float("nan"), float("nan")) if not len(values) else tuple(float(v) for v in np.percentile(values, [2.5, 97.5]))
 
 
-def predict_all(checkpoints: dict[str, Path], dataset_dir: str | Path, label: str = "chunk") -> pd.DataFrame:
-    """Every checkpoint's P(spill) on every chunk of `dataset_dir`, side by side (checks they align),
-    with each chunk's `label` of the kind named ("chunk" or "horizon"), whatever each model trained on."""
+def predict_all(checkpoints: dict[str, Path], dataset_dirs: str | Path | list[str] | list[Path],
+                label: str = "chunk") -> pd.DataFrame:
+    """Every checkpoint's P(spill) on every chunk of one dataset, or of several scored as one set,
+    side by side (checks they align), with each chunk's `label` of the kind named ("chunk" or
+    "horizon"), whatever each model trained on. With several datasets each chunk's `episode` is
+    prefixed with its dataset's directory, so the bootstrap resamples every dataset's episodes as
+    distinct units; a dataset listed twice is an InputError."""
+    from grits_lab.spillage.chunk_dataset import check_spillage_dataset, refuse_listed_twice
     from grits_lab.spillage.predictor_checkpoint import load_predictor
     from grits_lab.spillage.predictor_training import predict_chunks
 
+    dirs = [Path(dataset_dirs)] if isinstance(dataset_dirs, (str, Path)) else [Path(d) for d in dataset_dirs]
+    if len(dirs) > 1:  # before any model runs
+        for d in dirs:
+            check_spillage_dataset(d)
+        refuse_listed_twice(dirs, "--eval")
     merged: pd.DataFrame | None = None
     for name, path in checkpoints.items():
-        frame, _ = predict_chunks(load_predictor(path), dataset_dir, label=label)
-        frame = frame.rename(columns={"p_spill": f"p_{name}"})
+        predictor = load_predictor(path)
+        parts = []
+        for d in dirs:
+            part, _ = predict_chunks(predictor, d, label=label)
+            if len(dirs) > 1:
+                part["episode"] = f"{d}/" + part["episode"].astype(str)
+            parts.append(part)
+        frame = pd.concat(parts, ignore_index=True).rename(columns={"p_spill": f"p_{name}"})
         if merged is None:
             merged = frame
         elif not merged[["episode", "chunk", "label"]].equals(frame[["episode", "chunk", "label"]]):
-            raise InputError(f"predictor {name!r} saw different chunks of {dataset_dir} than the others (model.n_action_steps differs?)")
+            raise InputError(f"predictor {name!r} saw different chunks of {', '.join(map(str, dirs))} than the others "
+                             "(model.n_action_steps differs?)")
         else:
             merged[f"p_{name}"] = frame[f"p_{name}"].to_numpy()
     assert merged is not None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -116,3 +117,17 @@ def test_cli_compares_trained_predictors_and_refuses_an_untrained_one(tmp_path, 
     assert len(predictions) == 12 * 3 and predictions.groupby("episode")["chunk"].max().eq(2).all()
     assert (out / "predictor_comparison.png").stat().st_size > 10_000
     assert "full − AUROC" in (out / "predictor_comparison.md").read_text()
+    # Several held-out sets scored as one: each set's chunks as scored alone, its episodes distinct units.
+    second = tmp_path / "second"
+    shutil.copytree(tiny_dataset, second)
+    assert main(["compare-predictors", *paths, "--eval", str(tiny_dataset), str(second), "--output-dir", str(tmp_path / "runs"),
+                 "--bootstrap", "200"]) == 0
+    both = pd.read_parquet(tmp_path / "runs" / f"comparison_{tiny_dataset.name}+second" / "predictions.parquet")
+    assert len(both) == 2 * len(predictions) and both["episode"].nunique() == 2 * predictions["episode"].nunique()
+    for d in (tiny_dataset, second):
+        part = both[both["episode"].str.startswith(f"{d}/")]
+        np.testing.assert_allclose(part["p_full"].to_numpy(), predictions["p_full"].to_numpy())
+    capsys.readouterr()
+    assert main(["compare-predictors", *paths, "--eval", str(tiny_dataset), str(tiny_dataset) + "/"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--eval lists" in err[0] and "twice" in err[0]
