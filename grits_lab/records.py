@@ -72,3 +72,11 @@ def with_protocol(frame):
         recorded = frame["protocol"]
         frame["protocol"] = recorded.where(recorded.notna() & (recorded.astype(str).str.strip() != ""), inferred).astype(str)
     return frame
+
+
+def error_text(errors):
+    """The `error` column as text, "" where an episode raised nothing (a pandas Series of str).
+
+    A file whose episodes all succeeded stores the column as all-null floats; filling those with a
+    string is deprecated in pandas, so nulls are replaced on an object copy."""
+    return errors.astype(object).where(errors.notna(), "").astype(str)

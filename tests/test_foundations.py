@@ -208,3 +208,15 @@ def test_a_markdown_table_aligns_its_columns_and_refuses_a_ragged_row():
     assert table.splitlines() == ["| Method | Stage | n |", "|---|---|---:|", "| DP | carry | 3 |"]
     with pytest.raises(ValueError, match="2 cells, the header 3"):
         markdown_table(["Method", "Stage", "n"], [["DP", "carry"]])
+
+
+def test_error_text_is_empty_where_an_episode_raised_nothing_whatever_the_stored_dtype():
+    import warnings
+
+    from grits_lab.records import error_text
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # an all-null float column must not take the deprecated string fill
+        assert error_text(pd.Series([np.nan, np.nan])).tolist() == ["", ""]
+    assert error_text(pd.Series(["InputError: x", None])).tolist() == ["InputError: x", ""]
+    assert error_text(pd.Series(["boom", pd.NA], dtype="string")).tolist() == ["boom", ""]

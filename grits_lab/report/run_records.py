@@ -32,7 +32,7 @@ import yaml
 
 from grits_lab.config import parse_yaml
 from grits_lab.errors import InputError, StorageError
-from grits_lab.records import OUTCOME_COLUMNS, with_protocol
+from grits_lab.records import OUTCOME_COLUMNS, error_text, with_protocol
 from grits_lab.report.vocabulary import canonical_name, method_display
 
 REQUIRED_COLUMNS = ("method", "food", "level", *OUTCOME_COLUMNS)
@@ -144,7 +144,7 @@ def normalize_records(frame: pd.DataFrame) -> pd.DataFrame:
         frame[column] = frame[column].astype(str)
     if "error" not in frame.columns:
         frame["error"] = ""
-    frame["error"] = frame["error"].fillna("").astype(str).str.strip()
+    frame["error"] = error_text(frame["error"]).str.strip()
     frame["is_error"] = frame["error"] != ""
     for column in FLAG_COLUMNS:
         if column in frame.columns:
