@@ -205,6 +205,7 @@ def write_summary(run: RunData, out_dir: str | Path, command: str) -> list[Path]
         raise InputError(f"--summary-to needs episode records; {run.run_dir} has none")
     out = Path(out_dir)
     ensure_writable_dir(out)
+    provenance = summary_provenance(run, command)  # before any write: a page in the checkout would mark it changed
     files = []
     tables = [(SUMMARY_FILE, summary_table(run.episodes)), (STAGES_FILE, stage_cause_table(run.episodes))]
     if run.episodes["method"].isin(MAIN_METHODS).any():  # the paper's claims concern its methods, not the oracle
@@ -221,7 +222,7 @@ def write_summary(run: RunData, out_dir: str | Path, command: str) -> list[Path]
             (out / name).unlink(missing_ok=True)
     write_text_atomic(out / EPISODES_FILE, episodes_csv(run.episodes))
     files.append(out / EPISODES_FILE)
-    write_json_atomic(out / PROVENANCE_FILE, summary_provenance(run, command))
+    write_json_atomic(out / PROVENANCE_FILE, provenance)
     files.append(out / PROVENANCE_FILE)
     config = (run.run_dir if run.run_dir.is_dir() else run.run_dir.parent) / CONFIG_FILE
     if config.is_file():

@@ -232,3 +232,20 @@ def test_without_commits_in_the_records_the_page_names_the_runs_provenance(tmp_p
     out = tmp_path / "docs" / "experiments" / "tiny"
     assert main(["report", str(run), "--output-dir", str(tmp_path / "report"), "--summary-to", str(out)]) == 0
     assert "records' code: `abc123`." in provenance_block(tmp_path, "tiny", out)
+
+
+def test_the_summary_reads_the_code_commit_before_it_writes_into_the_page(tmp_path, monkeypatch):
+    """A page lives in the checkout: read after the summary's own files, the commit would always
+    read "with uncommitted changes"."""
+    import grits_lab.report.summary as summary
+    from grits_lab.report.run_records import load_run
+
+    run = tmp_path / "run"
+    run.mkdir()
+    pd.DataFrame([episode("dp", "sago", "high", 0, "success")]).to_parquet(run / "episodes.parquet")
+    page = tmp_path / "docs" / "experiments" / "commit"
+    seen = []
+    monkeypatch.setattr(summary, "git_commit", lambda: seen.append(sorted(p.name for p in page.glob("*"))) or "abc123")
+    summary.write_summary(load_run(run), page, "grits-lab report run --summary-to docs/experiments/commit")
+    assert seen == [[]]
+    assert json.loads((page / "provenance.json").read_text())["summary code commit"] == "abc123"
