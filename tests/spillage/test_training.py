@@ -138,7 +138,6 @@ def test_cli_trains_evaluates_and_reports_bad_input_in_one_line(tmp_path, tiny_d
 
 
 def test_a_predictor_chunk_length_the_dataset_was_not_collected_with_is_refused_before_training(tmp_path, tiny_dataset):
-
     dataset = Path(shutil.copytree(tiny_dataset, tmp_path / "d12"))  # collected with chunks of 12
     manifest = yaml.safe_load((dataset / "dataset.yaml").read_text())
     (dataset / "dataset.yaml").write_text(yaml.safe_dump({**manifest, "config": {"n_action_steps": 12}}))
@@ -154,7 +153,6 @@ def _retired(source, key, remedy):
 
 
 def test_a_dataset_that_calls_the_chunk_length_chunk_len_is_refused_naming_the_file_and_key(tmp_path, tiny_dataset):
-
     from grits_lab.data.format import rebuild_index, read_episode, write_episode
 
     # Its manifest's collection config says `chunk_len`, as every dataset collected before scoop-v4 does.
@@ -203,7 +201,6 @@ def test_a_checkpoint_that_calls_the_chunk_length_chunk_len_is_refused_to_load_a
 
 
 def test_a_non_finite_value_in_the_dataset_is_refused_naming_its_file(tmp_path, tiny_dataset):
-
     from grits_lab.data.format import read_episode, write_episode
     from grits_lab.errors import StorageError
 
@@ -399,4 +396,3 @@ def test_cli_refuses_unusable_dataset_paths_in_one_line_before_any_epoch(tmp_pat
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and expected in err[0], (second[:20], err)
     assert not (tmp_path / "runs").exists()
-
