@@ -110,8 +110,24 @@ def test_claims_compare_spillage_reduction_with_the_paper(records):
     claims = claims_table(records).data.set_index("quantity")
     reduction = claims.loc["Spillage reduction, GRITS relative to Diffusion Policy"]
     assert reduction["simulation"] == pytest.approx(1 - (1 / 14) / (3 / 10))
-    assert reduction["note"] == "holds"
+    # 1/14 against 3/10: a reduction beyond the paper's 40 %, on intervals that overlap
+    assert reduction["note"] == "holds on the point estimates; Wilson intervals overlap"
     assert claims.loc["Diffusion Policy (Post.): spillage", "note"] == "no simulated episodes"
+
+
+def test_a_spillage_reduction_is_called_separated_only_when_the_wilson_intervals_are():
+    def claim(grits_spills: int, dp_spills: int) -> str:
+        rows = [episode(m, "sago", "low" if i < 20 else "high", i % 20, "spill" if i < spills else "success")
+                for m, spills in (("grits", grits_spills), ("dp", dp_spills)) for i in range(40)]
+        claims = claims_table(normalize_records(pd.DataFrame(rows))).data.set_index("quantity")
+        return claims.loc["Spillage reduction, GRITS relative to Diffusion Policy", "note"]
+
+    # 1/40 [0.4 %, 12.9 %] against 20/40 [35.2 %, 64.8 %]: apart
+    assert claim(1, 20) == "holds, Wilson intervals separated"
+    # 5/40 [5.5 %, 26.1 %] against 10/40 [14.2 %, 40.2 %]: a 50 % reduction whose intervals overlap
+    assert claim(5, 10) == "holds on the point estimates; Wilson intervals overlap"
+    # 8/40 against 10/40: 20 %, short of the paper's 40 %
+    assert claim(8, 10) == "does not hold"
 
 
 def test_failure_table_counts_each_episode_once_at_the_stage_that_ended_it():
