@@ -80,3 +80,8 @@ def error_text(errors):
     A file whose episodes all succeeded stores the column as all-null floats; filling those with a
     string is deprecated in pandas, so nulls are replaced on an object copy."""
     return errors.astype(object).where(errors.notna(), "").astype(str)
+
+
+def has_error(errors):
+    """Per episode, whether its `error` column holds any text (a boolean pandas Series)."""
+    return error_text(errors).str.len() > 0

@@ -37,7 +37,7 @@ from grits_lab.evaluation.methods import (
     checkpoint_identity,
 )
 from grits_lab.io import ensure_writable_dir, exclusive_directory, save_parquet_atomic, write_json_atomic, write_text_atomic
-from grits_lab.records import CODE_COMMIT, CPU_KERNELS, RECORD_COLUMNS, error_text, with_protocol
+from grits_lab.records import CODE_COMMIT, CPU_KERNELS, RECORD_COLUMNS, error_text, has_error, with_protocol
 from grits_lab.runners import EpisodeResult, EpisodeSpec, make_executor
 from grits_lab.runners.base import Executor
 from grits_lab.runners.executor_config import check_reachable, cluster_address
@@ -418,7 +418,7 @@ def failed_episodes_line(records: pd.DataFrame, records_path: str | Path) -> str
     or None when every episode ran; `grits-lab evaluate` prints it and exits 1."""
     if records.empty:
         return None
-    failed = records[error_text(records["error"]).str.len() > 0]
+    failed = records[has_error(records["error"])]
     if failed.empty:
         return None
     first = failed.iloc[0]
@@ -435,7 +435,7 @@ def summary_table(records: pd.DataFrame) -> str:
         return "no episodes"
     lines = [f"{'method':<16} {'n':>4} {'err':>4}  {'task success':<22} {'spillage':<22} {'scoop failure':<22}"]
     for method, rows in records.groupby("method", sort=False):
-        errors = error_text(rows["error"]).str.len() > 0
+        errors = has_error(rows["error"])
         cells = []
         for column in ("task_success", "spillage", "scoop_failure"):
             k = int((rows[column].astype(bool) & ~errors).sum()) if column == "task_success" else int(rows[column].astype(bool).sum())

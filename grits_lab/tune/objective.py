@@ -15,7 +15,7 @@ import pandas as pd
 
 from grits_lab.errors import InputError
 from grits_lab.evaluation.grid import EpisodeKey
-from grits_lab.records import RECORD_COLUMNS, error_text
+from grits_lab.records import RECORD_COLUMNS, has_error
 from grits_lab.tune.study_config import ObjectiveConfig, StudyConfig
 
 
@@ -67,7 +67,7 @@ def check_records(records: pd.DataFrame, episodes: list[EpisodeKey]) -> None:
 def scored_outcomes(records: pd.DataFrame) -> pd.DataFrame:
     """Per episode (records' index), the outcomes as the sweep scores them: `task_success`,
     `spillage`, `scoop_failure`; an episode with an error is no success and a scoop failure."""
-    errors = error_text(records["error"]).str.len() > 0
+    errors = has_error(records["error"])
     return pd.DataFrame({
         "task_success": records["task_success"].astype(bool) & ~errors,
         "spillage": records["spillage"].astype(bool),
