@@ -83,5 +83,7 @@ def error_text(errors):
 
 
 def has_error(errors):
-    """Per episode, whether its `error` column holds any text (a boolean pandas Series)."""
-    return error_text(errors).str.len() > 0
+    """Per episode, whether its `error` column holds any text other than whitespace (a boolean pandas
+    Series). The one rule for what counts as a failed episode: evaluate's summary, the sweep
+    objective and the report all ask it."""
+    return error_text(errors).str.strip().str.len() > 0

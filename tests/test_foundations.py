@@ -220,3 +220,17 @@ def test_error_text_is_empty_where_an_episode_raised_nothing_whatever_the_stored
         assert error_text(pd.Series([np.nan, np.nan])).tolist() == ["", ""]
     assert error_text(pd.Series(["InputError: x", None])).tolist() == ["InputError: x", ""]
     assert error_text(pd.Series(["boom", pd.NA], dtype="string")).tolist() == ["boom", ""]
+
+
+def test_evaluate_and_the_report_count_the_same_episodes_as_failed():
+    # one rule for a failed episode: text other than whitespace in `error`, whatever the stored dtype
+    from grits_lab.records import OUTCOME_COLUMNS, has_error
+    from grits_lab.report.run_records import normalize_records
+
+    errors = ["InputError: heap outside the bowl", None, "   ", "\n", np.nan, " RuntimeError: x "]
+    assert has_error(pd.Series(errors)).tolist() == [True, False, False, False, False, True]
+    frame = pd.DataFrame({"method": "dp", "food": "sago", "level": "brim", "error": errors,
+                          **{c: False for c in OUTCOME_COLUMNS}})
+    report = normalize_records(frame)
+    assert report["is_error"].tolist() == has_error(pd.Series(errors)).tolist()
+    assert report["error"].tolist()[-1] == "RuntimeError: x"

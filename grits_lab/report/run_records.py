@@ -32,7 +32,7 @@ import yaml
 
 from grits_lab.config import parse_yaml
 from grits_lab.errors import InputError, StorageError
-from grits_lab.records import OUTCOME_COLUMNS, error_text, with_protocol
+from grits_lab.records import OUTCOME_COLUMNS, error_text, has_error, with_protocol
 from grits_lab.report.vocabulary import canonical_name, method_display
 
 REQUIRED_COLUMNS = ("method", "food", "level", *OUTCOME_COLUMNS)
@@ -144,8 +144,8 @@ def normalize_records(frame: pd.DataFrame) -> pd.DataFrame:
         frame[column] = frame[column].astype(str)
     if "error" not in frame.columns:
         frame["error"] = ""
+    frame["is_error"] = has_error(frame["error"])
     frame["error"] = error_text(frame["error"]).str.strip()
-    frame["is_error"] = frame["error"] != ""
     for column in FLAG_COLUMNS:
         if column in frame.columns:
             frame[column] = _to_flag(frame[column], column, frame["is_error"])
