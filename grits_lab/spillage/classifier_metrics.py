@@ -102,7 +102,7 @@ def paired_bootstrap(
     n_resamples: int = 2000,
     seed: int = 0,
     metrics: tuple[str, ...] = ("auroc", "accuracy"),
-    strata: np.ndarray | None = None,
+    strata: np.ndarray | dict[str, np.ndarray] | None = None,
 ) -> dict[str, dict[str, np.ndarray]]:
     """Each metric of each model on the same `n_resamples` resamples of whole groups (episodes).
 
@@ -110,7 +110,8 @@ def paired_bootstrap(
     episodes, not chunks, gives honest intervals, and scoring every model on the same resample
     makes the differences between models paired (their common noise cancels). Returns
     `{metric: {model: (n_resamples,) values}}`; a resample with one class only gives NaN AUROC.
-    The metric "auroc_within" (auroc_within) needs `strata`, one per sample (e.g. its food).
+    A metric named "auroc_within..." is auroc_within over its strata, one per sample: `strata` is
+    either one array (for "auroc_within", e.g. each chunk's food) or `{metric: array}`.
     """
     labels = np.asarray(labels).reshape(-1)
     groups = np.asarray(groups).reshape(-1)
@@ -118,9 +119,11 @@ def paired_bootstrap(
     for name, p in probs.items():
         if p.shape != labels.shape:
             raise ValueError(f"model {name!r}: {p.shape} probabilities for {labels.shape} labels")
-    if "auroc_within" in metrics and (strata is None or np.asarray(strata).reshape(-1).shape != labels.shape):
-        raise ValueError("the metric auroc_within needs one stratum per label")
-    strata = None if strata is None else np.asarray(strata).reshape(-1)
+    by_metric = {} if strata is None else strata if isinstance(strata, dict) else {"auroc_within": strata}
+    by_metric = {m: np.asarray(v).reshape(-1) for m, v in by_metric.items()}
+    for m in metrics:
+        if m.startswith("auroc_within") and (m not in by_metric or by_metric[m].shape != labels.shape):
+            raise ValueError(f"the metric {m} needs one stratum per label")
     _, group_of = np.unique(groups, return_inverse=True)
     members = [np.flatnonzero(group_of == g) for g in range(group_of.max() + 1)] if len(groups) else []
     rng = np.random.default_rng(seed)
@@ -129,6 +132,6 @@ def paired_bootstrap(
         idx = np.concatenate([members[g] for g in rng.integers(len(members), size=len(members))])
         for name, p in probs.items():
             for m in metrics:
-                out[m][name][r] = (auroc_within(p[idx], labels[idx], strata[idx]) if m == "auroc_within"
+                out[m][name][r] = (auroc_within(p[idx], labels[idx], by_metric[m][idx]) if m.startswith("auroc_within")
                                    else METRICS[m](p[idx], labels[idx]))
     return out

@@ -20,15 +20,30 @@ from grits_lab.io import atomic_path, ensure_writable_dir, save_parquet_atomic, 
 from grits_lab.markdown import markdown_table
 from grits_lab.spillage.classifier_metrics import auroc_within, classification_report, paired_bootstrap, reliability_bins
 
+# Scores without a model, ranked beside the predictors: a predictor that guidance can use must beat
+# what it cannot change. Under the horizon label a chunk early in its scoop has more of the task
+# ahead of it, so it spills more often whatever its trajectory.
+BASELINES = {
+    "chunk_position": "no model: 1 / (1 + the chunk's index in its episode), earlier chunks ranked higher",
+}
+
 LABEL_MEANING = {
     "chunk": "the spilled count rose during the chunk's own actions",
     "horizon": "food spilled from the chunk's first action until the load was delivered",
 }
 
 
+def baseline_scores(predictions: pd.DataFrame) -> dict[str, np.ndarray]:
+    """Each baseline's score per chunk, `{name: (n_chunks,) float}` in (0, 1]: rank-only, not a
+    probability (their accuracy and ECE are not reported). Empty without a `chunk` column."""
+    if "chunk" not in predictions.columns:
+        return {}
+    return {"chunk_position": 1.0 / (1.0 + predictions["chunk"].to_numpy(dtype=np.float64))}
+
+
 @dataclass
 class Comparison:
-    table: pd.DataFrame  # one row per model: metrics, intervals, difference to the reference
+    table: pd.DataFrame  # one row per model, then per baseline (`kind`): metrics, intervals, difference to the reference
     predictions: pd.DataFrame  # one row per chunk: episode, chunk, label, p_<model>...
     reference: str
     n_resamples: int
@@ -37,25 +52,32 @@ class Comparison:
 
 
 def compare_predictions(predictions: pd.DataFrame, models: list[str], n_resamples: int = 2000, seed: int = 0, n_bins: int = 10,
-                        label: str = "chunk") -> Comparison:
-    """Table of AUROC / accuracy / ECE with 95 % intervals and paired differences to `models[0]`."""
+                        label: str = "chunk", baselines: bool = True) -> Comparison:
+    """Table of AUROC / accuracy / ECE with 95 % intervals and paired differences to `models[0]`;
+    with `baselines`, the rows of BASELINES follow the models (AUROC only, on the same resamples)."""
     if not models:
         raise InputError("no predictors to compare")
     labels = predictions["label"].to_numpy()
     probs = {m: predictions[f"p_{m}"].to_numpy() for m in models}
-    stratum = strata_column(predictions)
-    strata = None if stratum is None else predictions[stratum].to_numpy()
-    metrics = ("auroc", "accuracy") if strata is None else ("auroc", "accuracy", "auroc_within")
+    extra = baseline_scores(predictions) if baselines else {}
+    if clash := set(extra) & set(models):
+        raise InputError(f"a predictor is named like a baseline ({', '.join(sorted(clash))}); rename it")
+    probs.update(extra)
+    strata = within_strata(predictions)
+    metrics = ("auroc", "accuracy", *strata)
     boot = paired_bootstrap(probs, labels, predictions["episode"].to_numpy(), n_resamples=n_resamples, seed=seed,
                             metrics=metrics, strata=strata)
     reference = models[0]
-    point = {m: classification_report(probs[m], labels, n_bins) for m in models}
-    if strata is not None:
-        for m in models:
-            point[m]["auroc_within"] = auroc_within(probs[m], labels, strata)
+    point = {m: classification_report(probs[m], labels, n_bins) for m in probs}
+    for m in extra:  # a rank is not a probability: no accuracy, no calibration
+        point[m].update(accuracy=float("nan"), ece=float("nan"))
+        boot["accuracy"][m] = np.full(n_resamples, np.nan)
+    for metric, groups in strata.items():
+        for m in probs:
+            point[m][metric] = auroc_within(probs[m], labels, groups)
     rows = []
-    for m in models:
-        row: dict[str, Any] = {"model": m, **point[m]}
+    for m in probs:
+        row: dict[str, Any] = {"model": m, "kind": "baseline" if m in extra else "model", **point[m]}
         for metric in metrics:
             row[f"{metric}_lo"], row[f"{metric}_hi"] = _interval(boot[metric][m])
             if m == reference:
@@ -77,6 +99,22 @@ def strata_column(predictions: pd.DataFrame) -> str | None:
         if column in predictions.columns and predictions[column].nunique() > 1:
             return column
     return None
+
+
+def within_strata(predictions: pd.DataFrame) -> dict[str, np.ndarray]:
+    """The strata of the stratified AUROCs the chunks allow, `{metric: (n_chunks,) labels}`:
+    "auroc_within" by food (strata_column), and "auroc_within_position" by food and the chunk's
+    index in its episode, which asks what guidance needs: of the chunks of one food at one point of
+    the scoop, does the predictor rank those that spill higher? (Any score of the position alone is
+    0.5 there.) Empty without a food or shape column that holds two values."""
+    stratum = strata_column(predictions)
+    if stratum is None:
+        return {}
+    food = predictions[stratum].astype(str).to_numpy()
+    out = {"auroc_within": food}
+    if "chunk" in predictions.columns:
+        out["auroc_within_position"] = np.char.add(np.char.add(food, "#"), predictions["chunk"].astype(str).to_numpy())
+    return out
 
 
 def _interval(values: np.ndarray) -> tuple[float, float]:
@@ -136,30 +174,41 @@ def comparison_markdown(c: Comparison, dataset: str) -> str:
         "",
     ]
     stratum = strata_column(c.predictions)
-    within = stratum is not None and "auroc_within" in c.table.columns
-    header = ["model", "AUROC [95 %]", "accuracy [95 %]", "ECE", f"{ref} − AUROC [95 %] (p)", f"{ref} − accuracy [95 %] (p)"]
-    metrics = ["auroc", "accuracy"]
-    if within:
-        header[3:3] = [f"AUROC within {stratum} [95 %]"]
-        header.append(f"{ref} − AUROC within {stratum} [95 %] (p)")
-        metrics.append("auroc_within")
+    names = {"auroc": "AUROC", "accuracy": "accuracy", "auroc_within": f"AUROC within {stratum}",
+             "auroc_within_position": f"AUROC within {stratum} and position"}
+    metrics = [m for m in names if m in c.table.columns]
+    header = ["model", *(f"{names[m]} [95 %]" for m in metrics), "ECE", *(f"{ref} − {names[m]} [95 %] (p)" for m in metrics)]
     rows = []
     for r in c.table.to_dict("records"):
-        cells = [
-            r["model"],
-            f"{r['auroc']:.3f} [{r['auroc_lo']:.3f}, {r['auroc_hi']:.3f}]",
-            f"{r['accuracy']:.3f} [{r['accuracy_lo']:.3f}, {r['accuracy_hi']:.3f}]",
-            f"{r['ece']:.3f}",
-        ]
-        if within:
-            cells[3:3] = [f"{r['auroc_within']:.3f} [{r['auroc_within_lo']:.3f}, {r['auroc_within_hi']:.3f}]"]
+        cells = [f"{r['model']} (baseline)" if r.get("kind") == "baseline" else r["model"],
+                 *(_with_interval(r, m) for m in metrics), "—" if _missing(r["ece"]) else f"{r['ece']:.3f}"]
         for metric in metrics:
             key = f"{ref}_minus_{metric}"
-            cells.append("reference" if r["model"] == ref else f"{r[key]:+.3f} [{r[key + '_lo']:+.3f}, {r[key + '_hi']:+.3f}] ({r[key + '_p']:.3f})")
+            cells.append("reference" if r["model"] == ref else "—" if _missing(r[key])
+                         else f"{r[key]:+.3f} [{r[key + '_lo']:+.3f}, {r[key + '_hi']:+.3f}] ({r[key + '_p']:.3f})")
         rows.append(cells)
-    notes = [] if not within else ["", f"AUROC within {stratum}: over the (spill, no spill) pairs of chunks of the same {stratum} only, "
-                                       f"so knowing which {stratum}s spill more earns nothing; guidance needs this one."]
+    notes = [f"{name} (baseline): {meaning}; a rank, not a probability, so it has no accuracy or ECE."
+             for name, meaning in BASELINES.items() if name in set(c.table["model"])]
+    if "auroc_within" in metrics:
+        notes.append(f"AUROC within {stratum}: over the (spill, no spill) pairs of chunks of the same {stratum} only, "
+                     f"so knowing which {stratum}s spill more earns nothing; guidance needs this one.")
+    if "auroc_within_position" in metrics:
+        notes.append(f"AUROC within {stratum} and position: over the pairs of chunks of the same {stratum} at the same index "
+                     "in their episodes, so knowing how far into the scoop a chunk is earns nothing either; any score of "
+                     "the position alone is 0.5 there.")
+    notes = [line for note in notes for line in ("", note)]
     return "\n".join(lines + [markdown_table(header, rows, right=len(header))] + notes) + "\n"
+
+
+def _missing(value: Any) -> bool:
+    return value is None or (isinstance(value, float) and np.isnan(value))
+
+
+def _with_interval(row: dict[str, Any], metric: str) -> str:
+    """"0.803 [0.624, 0.951]", or "—" where the row has no such metric (a baseline's accuracy)."""
+    if _missing(row[metric]):
+        return "—"
+    return f"{row[metric]:.3f} [{row[metric + '_lo']:.3f}, {row[metric + '_hi']:.3f}]"
 
 
 def plot_comparison(c: Comparison, path: Path) -> None:
@@ -171,12 +220,18 @@ def plot_comparison(c: Comparison, path: Path) -> None:
 
     y = c.predictions["label"].to_numpy().astype(bool)
     fig, (roc, rel) = plt.subplots(1, 2, figsize=(10, 4.5))
+    scores = baseline_scores(c.predictions)
     for r in c.table.to_dict("records"):
-        p = c.predictions[f"p_{r['model']}"].to_numpy()
+        baseline = r.get("kind") == "baseline"
+        p = scores[r["model"]] if baseline else c.predictions[f"p_{r['model']}"].to_numpy()
+        # ties (a baseline's equal scores) as one step, not in row order
         order = np.argsort(-p, kind="mergesort")
-        tpr = np.concatenate([[0.0], np.cumsum(y[order]) / max(y.sum(), 1)])
-        fpr = np.concatenate([[0.0], np.cumsum(~y[order]) / max((~y).sum(), 1)])
-        roc.plot(fpr, tpr, label=f"{r['model']} ({r['auroc']:.3f})")
+        cuts = np.r_[np.flatnonzero(np.diff(p[order])), len(p) - 1] if len(p) else np.array([], dtype=int)
+        tpr = np.concatenate([[0.0], (np.cumsum(y[order]) / max(y.sum(), 1))[cuts]])
+        fpr = np.concatenate([[0.0], (np.cumsum(~y[order]) / max((~y).sum(), 1))[cuts]])
+        roc.plot(fpr, tpr, ls="--" if baseline else "-", label=f"{r['model']}{' (baseline)' if baseline else ''} ({r['auroc']:.3f})")
+        if baseline:
+            continue
         mean_p, rate, _ = reliability_bins(p, y, c.n_bins)
         rel.plot(mean_p, rate, marker="o", label=f"{r['model']} (ECE {r['ece']:.3f})")
     roc.plot([0, 1], [0, 1], color="grey", lw=0.8, ls="--")

@@ -91,6 +91,56 @@ def test_the_comparison_scores_within_food_when_the_chunks_name_their_food():
     assert "auroc_within" not in compare_predictions(_predictions(), ["good", "noise"], n_resamples=50).table.columns
 
 
+def _position_matters(n_episodes=30, chunks=5, seed=1):
+    # two foods; a chunk spills under the horizon label when food will still spill after it: the
+    # first chunks of an episode spill more often, and within a position, chunks whose `signal` is
+    # high spill
+    rng = np.random.default_rng(seed)
+    episode = np.repeat([f"ep_{e:03d}" for e in range(n_episodes)], chunks)
+    chunk = np.tile(np.arange(chunks), n_episodes)
+    signal = rng.uniform(0, 1, len(chunk))
+    label = (signal > 0.3 + 0.15 * chunk).astype(int)
+    food = np.where(np.arange(len(chunk)) // chunks % 2 == 0, "a", "b")
+    return pd.DataFrame({"episode": episode, "chunk": chunk, "food": food, "label": label,
+                         "p_signal": signal, "p_position": 1.0 / (1.0 + chunk) + 0.0 * signal})
+
+
+def test_the_chunk_position_baseline_ranks_by_position_only_and_scores_half_within_a_position():
+    frame = _position_matters()
+    y = frame["label"].to_numpy()
+    c = compare_predictions(frame, ["signal", "position"], n_resamples=200)
+    rows = c.table.set_index("model")
+    assert rows.loc["chunk_position", "kind"] == "baseline" and rows.loc["signal", "kind"] == "model"
+    # the baseline's rank is the position's: the same AUROC as a model that knows only the position
+    assert rows.loc["chunk_position", "auroc"] == pytest.approx(auroc(1.0 / (1.0 + frame["chunk"]), y))
+    assert rows.loc["chunk_position", "auroc"] > 0.6
+    assert rows.loc["chunk_position", "auroc"] == pytest.approx(rows.loc["position", "auroc"])
+    assert np.isnan(rows.loc["chunk_position", "accuracy"]) and np.isnan(rows.loc["chunk_position", "ece"])
+    # within food and position, the position earns nothing and the signal everything
+    assert rows.loc["chunk_position", "auroc_within_position"] == 0.5 == rows.loc["position", "auroc_within_position"]
+    assert rows.loc["signal", "auroc_within_position"] == 1.0
+    assert rows.loc["chunk_position", "signal_minus_auroc_within_position_lo"] > 0.3
+    from grits_lab.spillage.compare import comparison_markdown
+    text = comparison_markdown(c, "d")
+    assert "| chunk_position (baseline) |" in text and "AUROC within food and position [95 %]" in text
+    baseline_row = next(line for line in text.splitlines() if line.startswith("| chunk_position"))
+    assert baseline_row.count("—") == 3  # accuracy, ECE and the accuracy difference
+    assert "chunk_position" not in compare_predictions(frame, ["signal"], n_resamples=50, baselines=False).table["model"].tolist()
+
+
+def test_paired_bootstrap_takes_strata_per_stratified_metric():
+    frame = _position_matters()
+    food, position = frame["food"].to_numpy(), (frame["food"] + "#" + frame["chunk"].astype(str)).to_numpy()
+    boot = paired_bootstrap({"p": frame["p_position"].to_numpy()}, frame["label"], frame["episode"], n_resamples=50,
+                            metrics=("auroc_within", "auroc_within_position"),
+                            strata={"auroc_within": food, "auroc_within_position": position})
+    np.testing.assert_array_equal(boot["auroc_within_position"]["p"], 0.5)
+    assert boot["auroc_within"]["p"].mean() > 0.6
+    with pytest.raises(ValueError, match="auroc_within_position needs one stratum per label"):
+        paired_bootstrap({"p": frame["p_position"].to_numpy()}, frame["label"], frame["episode"], n_resamples=5,
+                         metrics=("auroc_within_position",), strata=food)
+
+
 def test_cli_compares_trained_predictors_and_refuses_an_untrained_one(tmp_path, tiny_dataset, capsys):
     paths = []
     for name, inputs in (("full", "trajectory_and_cloud"), ("traj", "trajectory")):
@@ -111,7 +161,8 @@ def test_cli_compares_trained_predictors_and_refuses_an_untrained_one(tmp_path, 
     assert main(["compare-predictors", *paths, "--eval", str(tiny_dataset), "--output-dir", str(tmp_path / "runs"),
                  "--bootstrap", "200"]) == 0
     summary = json.loads((out / "predictor_comparison.json").read_text())
-    assert [m["model"] for m in summary["models"]] == ["full", "traj"] and summary["reference"] == "full"
+    assert [(m["model"], m["kind"]) for m in summary["models"]] == [("full", "model"), ("traj", "model"), ("chunk_position", "baseline")]
+    assert summary["reference"] == "full"
     predictions = pd.read_parquet(out / "predictions.parquet")
     assert list(predictions.columns) == ["episode", "chunk", "shape", "label", "p_full", "p_traj"]
     assert len(predictions) == 12 * 3 and predictions.groupby("episode")["chunk"].max().eq(2).all()

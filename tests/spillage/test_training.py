@@ -335,7 +335,7 @@ def test_cli_scores_either_label_and_compare_needs_one_when_predictors_differ(tm
     assert "--label" in capsys.readouterr().err
     assert main(["compare-predictors", *paths, "--eval", str(tiny_horizon_dataset), "--bootstrap", "100", "--label", "horizon"]) == 0
     table = json.loads((tmp_path / "runs" / "comparison_tiny_horizon_horizon" / "predictor_comparison.json").read_text())
-    assert table["label"] == "horizon" and [m["model"] for m in table["models"]] == ["h", "c"]
+    assert table["label"] == "horizon" and [m["model"] for m in table["models"] if m["kind"] == "model"] == ["h", "c"]
 
 
 def test_several_datasets_train_together_each_split_as_when_trained_alone(tmp_path, tiny_dataset, tiny_horizon_dataset):
