@@ -1,4 +1,4 @@
-"""`grits-lab report RUN_DIR [OTHER_RUN ...] [--output-dir DIR] [--summary-to DIR] [--videos N]`: the paper's tables and figures from a run's records, optionally with replayed episodes."""
+"""`grits-lab report RUN_DIR [OTHER_RUN ...] [--output-dir DIR] [--methods METHOD ...] [--summary-to DIR] [--videos N]`: the paper's tables and figures from a run's records, optionally with replayed episodes."""
 
 from __future__ import annotations
 
@@ -26,6 +26,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--real", metavar="FILE.csv", action="append", default=[],
                         help="real-robot trials (method, food, level, trial, task_success, spillage, scoop_failure; "
                              "grits_lab/report/real_trials.py) shown beside the simulation and the paper; repeatable")
+    parser.add_argument("--methods", metavar="METHOD", nargs="+", default=[],
+                        help="report only these methods' episodes (e.g. `--methods dp grits` when a run directory also holds "
+                             "a method stopped early); a method the records do not hold is an error")
     parser.add_argument("--summary-to", metavar="DIR", default=None,
                         help="also write the experiment's committed summary into DIR (summary.csv, stage_cause.csv, claims.csv, "
                              "provenance.json, config.yaml; grits_lab/report/summary.py), e.g. docs/experiments/NAME; "
@@ -56,7 +59,7 @@ def _run(args: argparse.Namespace) -> int:
             raise InputError(f"--videos replays episodes from a `grits-lab evaluate` run directory; {run_dir} lacks {', '.join(missing)}")
         replay = replay_episode
     result = build_report(args.run_dir, args.output_dir, also=args.also, videos=args.videos, replay=replay, progress=True,
-                          real=args.real)
+                          real=args.real, methods=args.methods)
     print(f"report written to {result.out_dir} ({len(result.files)} files): {result.out_dir / 'report.html'}")
     for note in result.missing:
         print(f"  {note}")
@@ -64,7 +67,9 @@ def _run(args: argparse.Namespace) -> int:
         from grits_lab.report.run_records import load_run
         from grits_lab.report.summary import write_summary
 
-        command = " ".join(["grits-lab report", args.run_dir, *args.also, "--summary-to", args.summary_to])
-        files = write_summary(load_run(args.run_dir, exclude=result.out_dir, also=args.also), args.summary_to, command)
+        command = " ".join(["grits-lab report", args.run_dir, *args.also, *(["--methods", *args.methods] if args.methods else []),
+                            "--summary-to", args.summary_to])
+        files = write_summary(load_run(args.run_dir, exclude=result.out_dir, also=args.also, methods=args.methods),
+                              args.summary_to, command)
         print(f"summary written to {args.summary_to} ({', '.join(f.name for f in files)}); render the pages: grits-lab results render")
     return 0

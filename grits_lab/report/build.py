@@ -70,7 +70,7 @@ def default_out_dir(run_dir: str | Path) -> Path:
 
 def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also: Sequence[str | Path] = (),
                  videos: int = 0, replay: Callable[..., Any] | None = None, progress: bool = False,
-                 training: Sequence[str | Path] = (), real: Sequence[str | Path] = ()) -> ReportResult:
+                 training: Sequence[str | Path] = (), real: Sequence[str | Path] = (), methods: Sequence[str] = ()) -> ReportResult:
     """Write the report of RUN_DIR into `out_dir` (default RUN_DIR/report).
 
     also: further run directories whose episode records are reported beside RUN_DIR's (a method
@@ -87,9 +87,11 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also
 
     real: CSV files of real-robot trials (grits_lab/report/real_trials.py), shown with the
     simulation and the paper's numbers in one table, "Real robot beside the simulation".
+
+    methods: report only these methods' episodes (load_run).
     """
     out = Path(out_dir) if out_dir is not None else default_out_dir(run_dir)
-    run = load_run(run_dir, exclude=out, also=also)
+    run = load_run(run_dir, exclude=out, also=also, methods=methods)
     real_table = real_robot_table(run.episodes, real) if real else None  # a bad file fails before anything is written
     ensure_writable_dir(out)
     result = ReportResult(out)

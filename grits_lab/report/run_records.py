@@ -68,7 +68,8 @@ class RunData:
     provenance: dict[str, Any] = field(default_factory=dict)
 
 
-def load_run(run_dir: str | Path, exclude: str | Path | None = None, also: Sequence[str | Path] = ()) -> RunData:
+def load_run(run_dir: str | Path, exclude: str | Path | None = None, also: Sequence[str | Path] = (),
+             methods: Sequence[str] = ()) -> RunData:
     """Read RUN_DIR; `exclude` (the report's own output folder) is never searched for inputs.
 
     `also`: more run directories (or .parquet files) whose episode records join RUN_DIR's, e.g. a
@@ -77,6 +78,9 @@ def load_run(run_dir: str | Path, exclude: str | Path | None = None, also: Seque
     RUN_DIR only. Raises InputError, before anything is written, when a run is missing, given twice,
     inside the report's output folder, a sweep (with `also`), without records (in `also`), or when
     two runs hold the same episode of the same method at the same (rho, s).
+
+    `methods`: keep only these methods' episodes (e.g. a run directory one of whose methods was
+    stopped early); InputError when the records hold no episode of one of them.
     """
     run_dir = Path(run_dir)
     others = [Path(p) for p in also]
@@ -118,9 +122,20 @@ def load_run(run_dir: str | Path, exclude: str | Path | None = None, also: Seque
     if frames:
         combined = pd.concat(frames, ignore_index=True)
         data.episodes, data.duplicates_dropped = _deduplicate(normalize_records(combined))
+    if methods:
+        data.episodes = _only_methods(data.episodes, methods)
     data.configs = _read_configs(base, data.trials_file, data.best_params_file)
     data.provenance = _read_provenance(base, data.trials_file)
     return data
+
+
+def _only_methods(episodes: pd.DataFrame | None, methods: Sequence[str]) -> pd.DataFrame:
+    """The episodes of `methods` only; InputError naming any method the records do not hold."""
+    held = [] if episodes is None else sorted(episodes["method"].unique())
+    if absent := [m for m in dict.fromkeys(methods) if m not in held]:
+        raise InputError(f"--methods: the records hold no episode of {', '.join(absent)} (they hold: {', '.join(held) or 'none'})")
+    assert episodes is not None
+    return episodes[episodes["method"].isin(list(methods))].reset_index(drop=True)
 
 
 def normalize_records(frame: pd.DataFrame) -> pd.DataFrame:

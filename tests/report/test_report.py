@@ -4,6 +4,7 @@ missing, a self-contained HTML page, booktabs LaTeX, sweep Pareto front, and CLI
 from __future__ import annotations
 
 import base64
+import json
 import math
 import re
 
@@ -289,6 +290,27 @@ def test_runs_given_together_report_a_method_once_per_guidance_setting(tmp_path,
         assert err.count("\n") == 0 and message in err and str(other) in err
     assert main(["report", str(protocol), str(tuned), "--videos", "1"]) == 2
     assert "one run directory" in capsys.readouterr().err
+
+
+def test_methods_reports_only_the_named_methods_and_refuses_one_the_records_lack(tmp_path, capsys):
+    # a run directory whose dp_post was stopped after one episode: `--methods` leaves it out of every table
+    run, out, summary = tmp_path / "run", tmp_path / "out", tmp_path / "summary"
+    run.mkdir()
+    rows = [episode("dp", "sago", "low", t, "success" if t < 3 else "spill") for t in range(4)]
+    rows += [episode("grits", "sago", "low", t, "success") for t in range(4)] + [episode("dp_post", "sago", "low", 0, "spill")]
+    pd.DataFrame(rows).to_parquet(run / "episodes.parquet", index=False)
+    assert main(["report", str(run), "--methods", "dp", "grits", "--output-dir", str(out), "--summary-to", str(summary)]) == 0
+    fig5 = pd.read_csv(out / "csv" / "fig5_overall.csv").set_index("variant")
+    assert fig5.loc["dp", "task_success_k"] == 3 and fig5.loc["grits", "episodes"] == 4
+    assert fig5["episodes"].fillna(0).get("dp_post", 0) == 0  # listed as missing, no episode counted
+    assert "dp_post" not in set(pd.read_csv(summary / "summary.csv")["method"])
+    provenance = json.loads((summary / "provenance.json").read_text())
+    assert sorted(provenance["methods"]) == ["dp", "grits"] and "--methods dp grits" in provenance["command"]
+    capsys.readouterr()
+    assert main(["report", str(run), "--methods", "dp", "grits_horizon", "--output-dir", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "grits_horizon" in err and "dp, dp_post, grits" in err
+    assert not (tmp_path / "x").exists()  # refused before anything is written
 
 
 def test_runs_guided_by_different_predictors_report_one_variant_per_predictor(tmp_path):
