@@ -15,8 +15,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="score trained spillage predictors on held-out datasets, with paired bootstrap intervals",
         description=(
             "Score the checkpoint of every predictor config on every chunk of DATASET (or of several) and write a table "
-            "(AUROC, accuracy, ECE with 95 %% intervals from resampling whole episodes, and each model's "
-            "paired difference to the first config), ROC and reliability plots, and the per-chunk predictions."
+            "(AUROC, accuracy, ECE with 95 % intervals from resampling whole episodes, and each model's "
+            "paired difference to the first config), ROC and reliability plots, and the per-chunk predictions. "
+            "Chunks of several foods are also scored within food, and chunks are scored within food and position "
+            "(the chunk's index in its episode); under the horizon label a no-model row, chunk_position, ranks "
+            "earlier chunks higher (docs/predictor.md, \"Held-out comparison\")."
         ),
     )
     parser.add_argument("configs", nargs="+", metavar="CONFIG", help="predictor configs; the first is the reference")

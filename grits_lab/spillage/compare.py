@@ -52,14 +52,15 @@ class Comparison:
 
 
 def compare_predictions(predictions: pd.DataFrame, models: list[str], n_resamples: int = 2000, seed: int = 0, n_bins: int = 10,
-                        label: str = "chunk", baselines: bool = True) -> Comparison:
+                        label: str = "chunk", baselines: bool | None = None) -> Comparison:
     """Table of AUROC / accuracy / ECE with 95 % intervals and paired differences to `models[0]`;
-    with `baselines`, the rows of BASELINES follow the models (AUROC only, on the same resamples)."""
+    with `baselines` (default: under the horizon label, whose spills fall early in an episode), the
+    rows of BASELINES follow the models (AUROC only, on the same resamples)."""
     if not models:
         raise InputError("no predictors to compare")
     labels = predictions["label"].to_numpy()
     probs = {m: predictions[f"p_{m}"].to_numpy() for m in models}
-    extra = baseline_scores(predictions) if baselines else {}
+    extra = baseline_scores(predictions) if (label == "horizon" if baselines is None else baselines) else {}
     if clash := set(extra) & set(models):
         raise InputError(f"a predictor is named like a baseline ({', '.join(sorted(clash))}); rename it")
     probs.update(extra)
@@ -104,16 +105,16 @@ def strata_column(predictions: pd.DataFrame) -> str | None:
 def within_strata(predictions: pd.DataFrame) -> dict[str, np.ndarray]:
     """The strata of the stratified AUROCs the chunks allow, `{metric: (n_chunks,) labels}`:
     "auroc_within" by food (strata_column), and "auroc_within_position" by food and the chunk's
-    index in its episode, which asks what guidance needs: of the chunks of one food at one point of
-    the scoop, does the predictor rank those that spill higher? (Any score of the position alone is
-    0.5 there.) Empty without a food or shape column that holds two values."""
+    index in its episode (by the index alone when the chunks are of one food), which asks what
+    guidance needs: of the chunks of one food at one point of the scoop, does the predictor rank
+    those that spill higher? Any score of the position alone is 0.5 there."""
     stratum = strata_column(predictions)
-    if stratum is None:
-        return {}
-    food = predictions[stratum].astype(str).to_numpy()
-    out = {"auroc_within": food}
+    out: dict[str, np.ndarray] = {}
+    food = np.full(len(predictions), "", dtype=object) if stratum is None else predictions[stratum].astype(str).to_numpy()
+    if stratum is not None:
+        out["auroc_within"] = food
     if "chunk" in predictions.columns:
-        out["auroc_within_position"] = np.char.add(np.char.add(food, "#"), predictions["chunk"].astype(str).to_numpy())
+        out["auroc_within_position"] = np.asarray([f"{f}#{c}" for f, c in zip(food, predictions["chunk"].to_numpy())])
     return out
 
 
@@ -174,27 +175,32 @@ def comparison_markdown(c: Comparison, dataset: str) -> str:
         "",
     ]
     stratum = strata_column(c.predictions)
-    names = {"auroc": "AUROC", "accuracy": "accuracy", "auroc_within": f"AUROC within {stratum}",
-             "auroc_within_position": f"AUROC within {stratum} and position"}
+    position = "AUROC within position" if stratum is None else f"AUROC within {stratum} and position"
+    names = {"auroc": "AUROC", "accuracy": "accuracy", "auroc_within": f"AUROC within {stratum}", "auroc_within_position": position}
     metrics = [m for m in names if m in c.table.columns]
-    header = ["model", *(f"{names[m]} [95 %]" for m in metrics), "ECE", *(f"{ref} − {names[m]} [95 %] (p)" for m in metrics)]
+    header = ["model", *(f"{names[m]} [95 %]" for m in metrics[:2]), "ECE", *(f"{names[m]} [95 %]" for m in metrics[2:]),
+              *(f"{ref} − {names[m]} [95 %] (p)" for m in metrics)]
     rows = []
     for r in c.table.to_dict("records"):
-        cells = [f"{r['model']} (baseline)" if r.get("kind") == "baseline" else r["model"],
-                 *(_with_interval(r, m) for m in metrics), "—" if _missing(r["ece"]) else f"{r['ece']:.3f}"]
+        baseline = r.get("kind") == "baseline"
+        shown = {m: "0.500 (by construction)" if baseline and m == "auroc_within_position" else _with_interval(r, m) for m in metrics}
+        cells = [f"{r['model']} (baseline)" if baseline else r["model"], *(shown[m] for m in metrics[:2]),
+                 "—" if _missing(r["ece"]) else f"{r['ece']:.3f}", *(shown[m] for m in metrics[2:])]
         for metric in metrics:
             key = f"{ref}_minus_{metric}"
             cells.append("reference" if r["model"] == ref else "—" if _missing(r[key])
                          else f"{r[key]:+.3f} [{r[key + '_lo']:+.3f}, {r[key + '_hi']:+.3f}] ({r[key + '_p']:.3f})")
         rows.append(cells)
-    notes = [f"{name} (baseline): {meaning}; a rank, not a probability, so it has no accuracy or ECE."
+    notes = [f"{name} (baseline): {meaning}; a rank, not a probability, so it has no accuracy or ECE. Within "
+             f"{'food and ' if stratum else ''}position it ties every pair, so its row's difference there is {ref}'s own "
+             "distance from chance, on the same resamples."
              for name, meaning in BASELINES.items() if name in set(c.table["model"])]
     if "auroc_within" in metrics:
         notes.append(f"AUROC within {stratum}: over the (spill, no spill) pairs of chunks of the same {stratum} only, "
                      f"so knowing which {stratum}s spill more earns nothing; guidance needs this one.")
     if "auroc_within_position" in metrics:
-        notes.append(f"AUROC within {stratum} and position: over the pairs of chunks of the same {stratum} at the same index "
-                     "in their episodes, so knowing how far into the scoop a chunk is earns nothing either; any score of "
+        notes.append(f"{position}: over the pairs of chunks {f'of the same {stratum} ' if stratum else ''}at the same index "
+                     "in their episodes, so knowing how far into the scoop a chunk is earns nothing; any score of "
                      "the position alone is 0.5 there.")
     notes = [line for note in notes for line in ("", note)]
     return "\n".join(lines + [markdown_table(header, rows, right=len(header))] + notes) + "\n"
@@ -211,6 +217,18 @@ def _with_interval(row: dict[str, Any], metric: str) -> str:
     return f"{row[metric]:.3f} [{row[metric + '_lo']:.3f}, {row[metric + '_hi']:.3f}]"
 
 
+def roc_points(scores: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The ROC curve's (false positive rate, true positive rate) points, from (0, 0) to (1, 1), one
+    point per distinct score: tied chunks (a baseline's equal scores) are one diagonal step, so the
+    curve's trapezoid area is the AUROC with ties counted half."""
+    scores, y = np.asarray(scores, dtype=np.float64), np.asarray(labels).astype(bool)
+    order = np.argsort(-scores, kind="mergesort")
+    cuts = np.r_[np.flatnonzero(np.diff(scores[order])), len(scores) - 1] if len(scores) else np.array([], dtype=int)
+    tpr = np.concatenate([[0.0], (np.cumsum(y[order]) / max(y.sum(), 1))[cuts]])
+    fpr = np.concatenate([[0.0], (np.cumsum(~y[order]) / max((~y).sum(), 1))[cuts]])
+    return fpr, tpr
+
+
 def plot_comparison(c: Comparison, path: Path) -> None:
     """ROC curves and reliability diagrams of every model, side by side."""
     import matplotlib
@@ -224,11 +242,7 @@ def plot_comparison(c: Comparison, path: Path) -> None:
     for r in c.table.to_dict("records"):
         baseline = r.get("kind") == "baseline"
         p = scores[r["model"]] if baseline else c.predictions[f"p_{r['model']}"].to_numpy()
-        # ties (a baseline's equal scores) as one step, not in row order
-        order = np.argsort(-p, kind="mergesort")
-        cuts = np.r_[np.flatnonzero(np.diff(p[order])), len(p) - 1] if len(p) else np.array([], dtype=int)
-        tpr = np.concatenate([[0.0], (np.cumsum(y[order]) / max(y.sum(), 1))[cuts]])
-        fpr = np.concatenate([[0.0], (np.cumsum(~y[order]) / max((~y).sum(), 1))[cuts]])
+        fpr, tpr = roc_points(p, y)
         roc.plot(fpr, tpr, ls="--" if baseline else "-", label=f"{r['model']}{' (baseline)' if baseline else ''} ({r['auroc']:.3f})")
         if baseline:
             continue

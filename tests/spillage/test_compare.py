@@ -93,22 +93,22 @@ def test_the_comparison_scores_within_food_when_the_chunks_name_their_food():
 
 def _position_matters(n_episodes=30, chunks=5, seed=1):
     # two foods; a chunk spills under the horizon label when food will still spill after it: the
-    # first chunks of an episode spill more often, and within a position, chunks whose `signal` is
-    # high spill
+    # first chunks of an episode spill more often, food a more often than food b, and among the
+    # chunks of one food at one position, those whose `signal` is high spill
     rng = np.random.default_rng(seed)
     episode = np.repeat([f"ep_{e:03d}" for e in range(n_episodes)], chunks)
     chunk = np.tile(np.arange(chunks), n_episodes)
     signal = rng.uniform(0, 1, len(chunk))
-    label = (signal > 0.3 + 0.15 * chunk).astype(int)
     food = np.where(np.arange(len(chunk)) // chunks % 2 == 0, "a", "b")
-    return pd.DataFrame({"episode": episode, "chunk": chunk, "food": food, "label": label,
-                         "p_signal": signal, "p_position": 1.0 / (1.0 + chunk) + 0.0 * signal})
+    label = (signal > 0.2 + 0.15 * chunk + 0.25 * (food == "b")).astype(int)
+    return pd.DataFrame({"episode": episode, "chunk": chunk, "food": food, "label": label, "p_signal": signal,
+                         "p_position": 1.0 / (1.0 + chunk) + 0.0 * signal, "p_food": np.where(food == "a", 0.7, 0.3)})
 
 
 def test_the_chunk_position_baseline_ranks_by_position_only_and_scores_half_within_a_position():
     frame = _position_matters()
     y = frame["label"].to_numpy()
-    c = compare_predictions(frame, ["signal", "position"], n_resamples=200)
+    c = compare_predictions(frame, ["signal", "position", "food"], n_resamples=200, label="horizon")
     rows = c.table.set_index("model")
     assert rows.loc["chunk_position", "kind"] == "baseline" and rows.loc["signal", "kind"] == "model"
     # the baseline's rank is the position's: the same AUROC as a model that knows only the position
@@ -116,16 +116,36 @@ def test_the_chunk_position_baseline_ranks_by_position_only_and_scores_half_with
     assert rows.loc["chunk_position", "auroc"] > 0.6
     assert rows.loc["chunk_position", "auroc"] == pytest.approx(rows.loc["position", "auroc"])
     assert np.isnan(rows.loc["chunk_position", "accuracy"]) and np.isnan(rows.loc["chunk_position", "ece"])
-    # within food and position, the position earns nothing and the signal everything
+    # within food and position, the position earns nothing, nor the food, and the signal everything
     assert rows.loc["chunk_position", "auroc_within_position"] == 0.5 == rows.loc["position", "auroc_within_position"]
+    assert rows.loc["food", "auroc"] > 0.6 and rows.loc["food", "auroc_within_position"] == 0.5
     assert rows.loc["signal", "auroc_within_position"] == 1.0
     assert rows.loc["chunk_position", "signal_minus_auroc_within_position_lo"] > 0.3
     from grits_lab.spillage.compare import comparison_markdown
     text = comparison_markdown(c, "d")
     assert "| chunk_position (baseline) |" in text and "AUROC within food and position [95 %]" in text
     baseline_row = next(line for line in text.splitlines() if line.startswith("| chunk_position"))
-    assert baseline_row.count("—") == 3  # accuracy, ECE and the accuracy difference
-    assert "chunk_position" not in compare_predictions(frame, ["signal"], n_resamples=50, baselines=False).table["model"].tolist()
+    assert baseline_row.count("—") == 3 and "0.500 (by construction)" in baseline_row  # no accuracy, ECE, accuracy difference
+    assert "chunk_position" not in compare_predictions(frame, ["signal"], n_resamples=50, label="horizon", baselines=False).table["model"].tolist()
+    assert "chunk_position" not in compare_predictions(frame, ["signal"], n_resamples=50, label="chunk").table["model"].tolist()
+    # chunks of one food: stratified by the position alone
+    one = compare_predictions(frame[frame["food"] == "a"], ["signal", "position"], n_resamples=50, label="horizon").table.set_index("model")
+    assert "auroc_within" not in one.columns and one.loc["position", "auroc_within_position"] == 0.5
+    assert one.loc["signal", "auroc_within_position"] == 1.0
+    header = comparison_markdown(compare_predictions(frame[frame["food"] == "a"], ["signal"], n_resamples=50, label="horizon"), "d")
+    assert "| AUROC within position [95 %] |" in header and "within food" not in header
+
+
+def test_the_roc_curve_steps_over_ties_and_its_area_is_the_auroc():
+    from grits_lab.spillage.compare import roc_points
+
+    frame = _position_matters()
+    y = frame["label"].to_numpy()
+    for scores in (1.0 / (1.0 + frame["chunk"].to_numpy()), frame["p_signal"].to_numpy(), frame["p_food"].to_numpy()):
+        fpr, tpr = roc_points(scores, y)
+        assert (fpr[0], tpr[0], fpr[-1], tpr[-1]) == (0.0, 0.0, 1.0, 1.0)
+        assert len(fpr) == len(np.unique(scores)) + 1
+        assert np.trapezoid(tpr, fpr) == pytest.approx(auroc(scores, y))
 
 
 def test_paired_bootstrap_takes_strata_per_stratified_metric():
@@ -161,7 +181,8 @@ def test_cli_compares_trained_predictors_and_refuses_an_untrained_one(tmp_path, 
     assert main(["compare-predictors", *paths, "--eval", str(tiny_dataset), "--output-dir", str(tmp_path / "runs"),
                  "--bootstrap", "200"]) == 0
     summary = json.loads((out / "predictor_comparison.json").read_text())
-    assert [(m["model"], m["kind"]) for m in summary["models"]] == [("full", "model"), ("traj", "model"), ("chunk_position", "baseline")]
+    # scored by the chunk label: no chunk-position baseline (it ranks by where horizon-label spills fall)
+    assert [(m["model"], m["kind"]) for m in summary["models"]] == [("full", "model"), ("traj", "model")]
     assert summary["reference"] == "full"
     predictions = pd.read_parquet(out / "predictions.parquet")
     assert list(predictions.columns) == ["episode", "chunk", "shape", "label", "p_full", "p_traj"]
