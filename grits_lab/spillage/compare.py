@@ -79,6 +79,8 @@ def compare_predictions(predictions: pd.DataFrame, models: list[str], n_resample
     rows = []
     for m in probs:
         row: dict[str, Any] = {"model": m, "kind": "baseline" if m in extra else "model", **point[m]}
+        if m not in extra and "chunk" in predictions.columns:
+            row["spearman_position"] = spearman_with_position(probs[m], predictions)
         for metric in metrics:
             row[f"{metric}_lo"], row[f"{metric}_hi"] = _interval(boot[metric][m])
             if m == reference:
@@ -116,6 +118,22 @@ def within_strata(predictions: pd.DataFrame) -> dict[str, np.ndarray]:
     if "chunk" in predictions.columns:
         out["auroc_within_position"] = np.asarray([f"{f}#{c}" for f, c in zip(food, predictions["chunk"].to_numpy())])
     return out
+
+
+def spearman_with_position(scores: np.ndarray, predictions: pd.DataFrame) -> float:
+    """Spearman correlation of a model's P(spill) with the chunk's index in its episode, within each
+    food (strata_column) and averaged weighted by its chunks; NaN where no food varies in both. Near
+    -1, the model's score is mostly how early in the scoop a chunk is, and the gradient guidance
+    follows points toward what later chunks look like."""
+    stratum = strata_column(predictions)
+    frame = pd.DataFrame({"p": np.asarray(scores, dtype=np.float64), "chunk": predictions["chunk"].to_numpy(),
+                          "food": "" if stratum is None else predictions[stratum].astype(str).to_numpy()})
+    total, weight = 0.0, 0
+    for _, group in frame.groupby("food"):
+        rho = group["p"].rank().corr(group["chunk"].rank())
+        if np.isfinite(rho):
+            total, weight = total + rho * len(group), weight + len(group)
+    return float(total / weight) if weight else float("nan")
 
 
 def _interval(values: np.ndarray) -> tuple[float, float]:
@@ -178,14 +196,17 @@ def comparison_markdown(c: Comparison, dataset: str) -> str:
     position = "AUROC within position" if stratum is None else f"AUROC within {stratum} and position"
     names = {"auroc": "AUROC", "accuracy": "accuracy", "auroc_within": f"AUROC within {stratum}", "auroc_within_position": position}
     metrics = [m for m in names if m in c.table.columns]
+    spearman = "spearman_position" in c.table.columns
     header = ["model", *(f"{names[m]} [95 %]" for m in metrics[:2]), "ECE", *(f"{names[m]} [95 %]" for m in metrics[2:]),
-              *(f"{ref} − {names[m]} [95 %] (p)" for m in metrics)]
+              *(["Spearman with position"] if spearman else []), *(f"{ref} − {names[m]} [95 %] (p)" for m in metrics)]
     rows = []
     for r in c.table.to_dict("records"):
         baseline = r.get("kind") == "baseline"
         shown = {m: "0.500 (by construction)" if baseline and m == "auroc_within_position" else _with_interval(r, m) for m in metrics}
         cells = [f"{r['model']} (baseline)" if baseline else r["model"], *(shown[m] for m in metrics[:2]),
                  "—" if _missing(r["ece"]) else f"{r['ece']:.3f}", *(shown[m] for m in metrics[2:])]
+        if spearman:
+            cells.append("—" if _missing(r.get("spearman_position")) else f"{r['spearman_position']:+.2f}")
         for metric in metrics:
             key = f"{ref}_minus_{metric}"
             cells.append("reference" if r["model"] == ref else "—" if _missing(r[key])
@@ -202,6 +223,11 @@ def comparison_markdown(c: Comparison, dataset: str) -> str:
         notes.append(f"{position}: over the pairs of chunks {f'of the same {stratum} ' if stratum else ''}at the same index "
                      "in their episodes, so knowing how far into the scoop a chunk is earns nothing; any score of "
                      "the position alone is 0.5 there.")
+    if spearman:
+        notes.append(f"Spearman with position: the rank correlation of P(spill) with the chunk's index in its episode"
+                     f"{f', within each {stratum}, averaged by its chunks' if stratum else ''} (point estimate). Near -1 the "
+                     "model's score is mostly how early in the scoop a chunk is, and guidance following its gradient pushes a "
+                     "plan toward what later chunks look like.")
     notes = [line for note in notes for line in ("", note)]
     return "\n".join(lines + [markdown_table(header, rows, right=len(header))] + notes) + "\n"
 

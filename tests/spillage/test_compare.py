@@ -119,13 +119,18 @@ def test_the_chunk_position_baseline_ranks_by_position_only_and_scores_half_with
     # within food and position, the position earns nothing, nor the food, and the signal everything
     assert rows.loc["chunk_position", "auroc_within_position"] == 0.5 == rows.loc["position", "auroc_within_position"]
     assert rows.loc["food", "auroc"] > 0.6 and rows.loc["food", "auroc_within_position"] == 0.5
+    # how much of a model's score is the position: -1 for the position itself, nothing for the signal
+    # or the food (constant within a food); a baseline is not scored
+    assert rows.loc["position", "spearman_position"] == pytest.approx(-1.0)
+    assert abs(rows.loc["signal", "spearman_position"]) < 0.2 and np.isnan(rows.loc["food", "spearman_position"])
+    assert np.isnan(rows.loc["chunk_position", "spearman_position"])
     assert rows.loc["signal", "auroc_within_position"] == 1.0
     assert rows.loc["chunk_position", "signal_minus_auroc_within_position_lo"] > 0.3
     from grits_lab.spillage.compare import comparison_markdown
     text = comparison_markdown(c, "d")
     assert "| chunk_position (baseline) |" in text and "AUROC within food and position [95 %]" in text
     baseline_row = next(line for line in text.splitlines() if line.startswith("| chunk_position"))
-    assert baseline_row.count("—") == 3 and "0.500 (by construction)" in baseline_row  # no accuracy, ECE, accuracy difference
+    assert baseline_row.count("—") == 4 and "0.500 (by construction)" in baseline_row  # no accuracy, ECE, Spearman, accuracy difference
     assert "chunk_position" not in compare_predictions(frame, ["signal"], n_resamples=50, label="horizon", baselines=False).table["model"].tolist()
     assert "chunk_position" not in compare_predictions(frame, ["signal"], n_resamples=50, label="chunk").table["model"].tolist()
     # chunks of one food: stratified by the position alone
