@@ -104,16 +104,22 @@ def strata_column(predictions: pd.DataFrame) -> str | None:
     return None
 
 
+def _food_per_chunk(predictions: pd.DataFrame) -> np.ndarray:
+    """Each chunk's food (or shape) as text, the column strata_column names; "" for every chunk when
+    the chunks are of one food."""
+    stratum = strata_column(predictions)
+    return np.full(len(predictions), "", dtype=object) if stratum is None else predictions[stratum].astype(str).to_numpy()
+
+
 def within_strata(predictions: pd.DataFrame) -> dict[str, np.ndarray]:
     """The strata of the stratified AUROCs the chunks allow, `{metric: (n_chunks,) labels}`:
     "auroc_within" by food (strata_column), and "auroc_within_position" by food and the chunk's
     index in its episode (by the index alone when the chunks are of one food), which asks what
     guidance needs: of the chunks of one food at one point of the scoop, does the predictor rank
     those that spill higher? Any score of the position alone is 0.5 there."""
-    stratum = strata_column(predictions)
     out: dict[str, np.ndarray] = {}
-    food = np.full(len(predictions), "", dtype=object) if stratum is None else predictions[stratum].astype(str).to_numpy()
-    if stratum is not None:
+    food = _food_per_chunk(predictions)
+    if strata_column(predictions) is not None:
         out["auroc_within"] = food
     if "chunk" in predictions.columns:
         out["auroc_within_position"] = np.asarray([f"{f}#{c}" for f, c in zip(food, predictions["chunk"].to_numpy())])
@@ -125,9 +131,8 @@ def spearman_with_position(scores: np.ndarray, predictions: pd.DataFrame) -> flo
     food (strata_column) and averaged weighted by its chunks; NaN where no food varies in both. Near
     -1, the model's score is mostly how early in the scoop a chunk is, and the gradient guidance
     follows points toward what later chunks look like."""
-    stratum = strata_column(predictions)
     frame = pd.DataFrame({"p": np.asarray(scores, dtype=np.float64), "chunk": predictions["chunk"].to_numpy(),
-                          "food": "" if stratum is None else predictions[stratum].astype(str).to_numpy()})
+                          "food": _food_per_chunk(predictions)})
     total, weight = 0.0, 0
     for _, group in frame.groupby("food"):
         rho = group["p"].rank().corr(group["chunk"].rank())
