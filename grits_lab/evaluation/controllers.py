@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 import torch
@@ -96,14 +96,16 @@ class DiffusionController(LearnedController):
     """dp, dp_post and the GRITS variants: one trained policy, a sampler, optionally a predictor.
 
     Each plan draws its initial noise from a generator seeded by (episode seed, plan index), so
-    dp and grits with rho = 0 see the very same noise and produce the very same episode.
+    dp and grits with rho = 0 see the very same noise and produce the very same episode;
+    `noise_keys(plan)` gives those keys (ScoopSettings.plan_noise_keys: one plan may branch).
     """
 
     def __init__(self, policy: Any, predictor: Any, sampler_kind: str, guidance: GuidanceConfig | None, posthoc: PostHocConfig | None,
-                 raw_cloud: bool = False) -> None:
+                 raw_cloud: bool = False, noise_keys: Callable[[int], tuple[object, ...]] | None = None) -> None:
         super().__init__(policy)
         self.predictor = predictor
         self.raw_cloud = raw_cloud
+        self.noise_keys = noise_keys or (lambda plan: ("plan", plan))
         self.n_action_steps = policy.config.n_action_steps
         scheduler = policy.noise_scheduler
         if sampler_kind == "guided":
@@ -132,7 +134,7 @@ class DiffusionController(LearnedController):
         if self.predictor is not None:
             cloud = scene.cloud_raw() if self.raw_cloud else scene.cloud()
             objective = SpillageObjective(self.predictor, cloud, self.policy.action_normalizer, self.n_obs_steps, self.n_action_steps)
-        generator = torch.Generator().manual_seed(derive_seed(self.seed, "plan", self.plans))
+        generator = torch.Generator().manual_seed(derive_seed(self.seed, *self.noise_keys(self.plans)))
         with torch.inference_mode(False):
             plan = self.policy.plan(obs, sampler=self.sampler, objective=objective, generator=generator)
         self.plans += 1

@@ -103,6 +103,10 @@ class EvaluationConfig(EpisodeGrid):
             if m in custom:
                 controller_class(m, custom[m])  # imported now: a wrong name fails at load
         require(len(set(self.methods)) == len(self.methods), "methods", self.methods, "without repeats")
+        if self.scoop.branch_plan is not None:  # only a diffusion policy's plans draw noise to branch on
+            for m in self.methods:
+                require(m in METHODS and METHODS[m].kind == "diffusion", "methods", m,
+                        "a diffusion-policy method (dp, dp_post, grits*) when scoop.branch_plan is set")
         require(self.num_threads >= 1, "num_threads", self.num_threads, "at least 1")
         require(self.flush_every >= 1, "flush_every", self.flush_every, "at least 1")
         self.transfer.require_time_step_fits(self.sim, "transfer.time_step")

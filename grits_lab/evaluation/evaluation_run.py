@@ -32,6 +32,7 @@ from grits_lab.errors import InputError, StorageError
 from grits_lab.evaluation.evaluation_config import EvaluationConfig, load_evaluation_config
 from grits_lab.evaluation.task_episode import evaluation_episode
 from grits_lab.evaluation.grid import EpisodeKey
+from grits_lab.policies.control import ScoopSettings
 from grits_lab.evaluation.methods import (
     METHODS, check_method_checkpoints, file_digest, guidance_columns, guidance_gap, method_checkpoints, method_spec,
     checkpoint_identity,
@@ -220,19 +221,29 @@ def _refuse_other_checkpoints(records_path: Path, done: list[dict[str, Any]], pa
                     f"{path} has digest {digests[path]}; rerun with --restart to discard the records, or choose another output_dir")
 
 
-def _refuse_other_action_offset(records_path: Path, done: list[dict[str, Any]], offset: float, draw: int) -> None:
-    """Records whose scoop ran with another `scoop.action_offset` (or `action_offset_draw`) are not resumed
-    under this one (a run directory holds one; records from before the columns ran without any):
-    InputError naming both."""
-    def recorded(r: dict[str, Any], column: str, kind: type) -> Any:
-        return kind(r[column]) if _present(r.get(column)) else kind(0)
+def _refuse_other_scoop_diagnostics(records_path: Path, done: list[dict[str, Any]], scoop: ScoopSettings) -> None:
+    """Records whose scoop ran with another `scoop.action_offset` (or `action_offset_draw`), or another
+    `scoop.branch_plan` / `branch_draw`, are not resumed under this one (a run directory holds one of
+    each; records from before the columns ran without any): InputError naming both."""
+    want = scoop.record_columns()
+    defaults = ScoopSettings().record_columns()
 
-    other = sorted({(recorded(r, "scoop_action_offset_m", float), recorded(r, "scoop_action_offset_draw", int)) for r in done}
-                   - {(float(offset), int(draw))})
-    if other:
-        raise InputError(f"{records_path} holds episodes run with `scoop.action_offset` {other[0][0]:g} m (draw {other[0][1]}), "
-                         f"but the config sets {float(offset):g} m (draw {int(draw)}); choose another output_dir "
-                         "(or rerun with --restart to discard them)")
+    def recorded(r: dict[str, Any]) -> tuple:
+        return tuple(type(want[c])(r[c]) if _present(r.get(c)) else defaults[c] for c in want)
+
+    other = sorted({recorded(r) for r in done} - {tuple(want.values())})
+    if not other:
+        return
+    offset, draw, plan, branch = other[0]
+    if (offset, draw) != (want["scoop_action_offset_m"], want["scoop_action_offset_draw"]):
+        raise InputError(f"{records_path} holds episodes run with `scoop.action_offset` {offset:g} m (draw {draw}), "
+                         f"but the config sets {want['scoop_action_offset_m']:g} m (draw {want['scoop_action_offset_draw']}); "
+                         "choose another output_dir (or rerun with --restart to discard them)")
+    def named(p: int, d: int) -> str:
+        return "no branch" if p < 0 else f"`scoop.branch_plan` {p} (draw {d})"
+    raise InputError(f"{records_path} holds episodes run with {named(plan, branch)}, but the config sets "
+                     f"{named(want['scoop_branch_plan'], want['scoop_branch_draw'])}; choose another output_dir "
+                     "(or rerun with --restart to discard them)")
 
 
 def other_kernels_note(records_path: Path, done: list[dict[str, Any]]) -> str:
@@ -329,8 +340,7 @@ def _evaluate_in(out: Path, config: EvaluationConfig, specs: list[EpisodeSpec], 
     done = [] if restart else _load_existing(records_path)
     _refuse_other_protocol(records_path, done)
     _refuse_other_checkpoints(records_path, done, paths, digests)
-    _refuse_other_action_offset(records_path, done, config.scoop.action_offset,
-                                config.scoop.action_offset_draw if config.scoop.action_offset else 0)
+    _refuse_other_scoop_diagnostics(records_path, done, config.scoop)
     recorded_methods = list(dict.fromkeys(str(r["method"]) for r in done))
     from grits_lab.evaluation.custom_methods import registered_methods
 

@@ -209,7 +209,7 @@ def build_controller(name: str, config: EvaluationConfig, paths: dict[str, str],
         predictor = cache(("predictor", paths[key]), lambda: load_predictor(paths[key]))
     return controllers.DiffusionController(
         policy, predictor, spec.sampler, config.guidance, config.posthoc,
-        raw_cloud=(spec.predictor == "predictor_raw"),
+        raw_cloud=(spec.predictor == "predictor_raw"), noise_keys=config.scoop.plan_noise_keys,
     )
 
 

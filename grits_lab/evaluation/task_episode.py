@@ -349,8 +349,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         "plan_time_mean_s": scoop["plan_time_mean_s"],
         "plan_time_max_s": scoop["plan_time_max_s"],
         "scoop_time_s": scoop_time,
-        "scoop_action_offset_m": float(config.scoop.action_offset),
-        "scoop_action_offset_draw": int(config.scoop.action_offset_draw) if config.scoop.action_offset else 0,
+        **config.scoop.record_columns(),
         CPU_KERNELS: cpu_kernels(),
         **summarize_guidance(scoop["diagnostics"]),
     }

@@ -61,6 +61,13 @@ class ScoopSettings:
     # Which seeded set of directions the offset takes: 0, 1, ... give independent nudges of the same
     # size on the same seeds (a second draw tells a nudge's chance part from the nudge's own effect).
     action_offset_draw: int = 0
+    # A diagnostic, null in every protocol config: the plan with this index (0 = the scoop's first)
+    # draws its initial noise from draw `branch_draw` instead of the episode's own, every other plan
+    # from the episode's own. Runs on the same seeds that differ only in `branch_draw` share every
+    # step before that plan and then execute another sample of the diffusion policy from one and the
+    # same state (docs/evaluation.md, "Branches from one state"). Draw 0 is the unbranched episode.
+    branch_plan: int | None = None
+    branch_draw: int = 0
 
     def __post_init__(self) -> None:
         require(self.max_steps >= 1, "scoop.max_steps", self.max_steps, "at least 1")
@@ -71,6 +78,28 @@ class ScoopSettings:
         require(0.0 <= self.action_offset <= 0.01, "scoop.action_offset", self.action_offset,
                 "in [0, 0.01] metres (a diagnostic nudge, not a motion: 0.0005 is half a millimetre)")
         require(self.action_offset_draw >= 0, "scoop.action_offset_draw", self.action_offset_draw, "non-negative")
+        require(self.branch_plan is None or self.branch_plan >= 0, "scoop.branch_plan", self.branch_plan,
+                "a plan index (0 = the scoop's first) or null")
+        require(self.branch_draw >= 0, "scoop.branch_draw", self.branch_draw, "non-negative")
+        require(self.branch_draw == 0 or self.branch_plan is not None, "scoop.branch_draw", self.branch_draw,
+                "0 unless scoop.branch_plan names the plan that branches")
+
+    def plan_noise_keys(self, plan: int) -> tuple[object, ...]:
+        """The keys after the episode's seed (`derive_seed(seed, *keys)`) of plan `plan`'s initial noise:
+        ("plan", plan), with ("branch", branch_draw) added at `branch_plan` when `branch_draw` > 0."""
+        if self.branch_plan is not None and self.branch_draw > 0 and plan == self.branch_plan:
+            return ("plan", plan, "branch", self.branch_draw)
+        return ("plan", plan)
+
+    def record_columns(self) -> dict[str, float | int]:
+        """The record columns of the diagnostic settings, as evaluation writes them:
+        `scoop_action_offset_m` and `scoop_action_offset_draw` (0 without an offset),
+        `scoop_branch_plan` (-1: none) and `scoop_branch_draw`. A record without them (made before
+        they were recorded) ran with the defaults."""
+        return {"scoop_action_offset_m": float(self.action_offset),
+                "scoop_action_offset_draw": int(self.action_offset_draw) if self.action_offset else 0,
+                "scoop_branch_plan": -1 if self.branch_plan is None else int(self.branch_plan),
+                "scoop_branch_draw": int(self.branch_draw)}
 
     def offset_vector(self, seed: int) -> np.ndarray:
         """(9,) what is added to every executed scoop action: `action_offset` metres in position along
