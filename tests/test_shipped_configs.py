@@ -29,6 +29,8 @@ def _loader(path: Path):
         return load_collect_config
     if name.startswith("evaluate") or "methods" in data:
         return load_evaluation_config
+    if name.startswith("scoop_branch_"):  # a draw of the branch study, merged onto it
+        return lambda p: load_evaluation_config(ROOT / "experiments" / "dp_branches_brim.yaml", dict(load_yaml(p)))
     if name.startswith(("transfer_", "sim_", "scoop_", "guide_")):  # an override of the transfer, the world, the scoop or the guide, merged onto the protocol
         return lambda p: load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(p)))
     if name.startswith("dp_rollouts_brim_"):  # an override of the brim rollouts (more trials), merged onto them
@@ -73,8 +75,13 @@ def test_the_policys_training_rollouts_are_on_training_foods_and_seeds_nothing_e
     assert rollouts.methods == ["dp"] and rollouts.rollout_chunks
     assert set(rollouts.foods) <= set(load_foods().names("train"))
     others = [p for p in (ROOT / "experiments").glob("*.yaml") if not p.name.startswith("dp_rollouts_")]
-    used = {load_evaluation_config(p).seed for p in others if "methods" in load_yaml(p)}
-    used |= {load_yaml(p).get("validation", {}).get("seed") for p in (ROOT / "sweeps").glob("*.yaml")}
+
+    def episodes(config):  # (food, level, episode seed) of every episode an evaluation config plays
+        return {(k.food, k.level, k.seed) for k in config.keys(load_foods(config.sim.foods_file))}
+
+    played = set().union(*(episodes(load_evaluation_config(p)) for p in others if "methods" in load_yaml(p)))
+    assert not episodes(rollouts) & played  # an evaluation may share the root seed (other trials), not an episode
+    used = {load_yaml(p).get("validation", {}).get("seed") for p in (ROOT / "sweeps").glob("*.yaml")}
     used |= {load_yaml(p).get("seed") for p in others if "kind" in load_yaml(p)}  # datasets
     assert rollouts.seed not in used
     # the rollout sets share a root seed but no level, so no episode (food, level, seed) twice

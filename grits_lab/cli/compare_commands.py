@@ -19,12 +19,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "paired difference to the first config), ROC and reliability plots, and the per-chunk predictions. "
             "Chunks of several foods are also scored within food, and chunks are scored within food and position "
             "(the chunk's index in its episode); under the horizon label a no-model row, chunk_position, ranks "
-            "earlier chunks higher (docs/predictor.md, \"Held-out comparison\")."
+            "earlier chunks higher (docs/predictor.md, \"Held-out comparison\"). With --branches instead of --eval, "
+            "the chunks are those runs of one branch plan executed there, scored within each state, with how often "
+            "the draws of a state disagree and how often each guide's pick spills (docs/predictor.md, \"Within one state\")."
         ),
     )
     parser.add_argument("configs", nargs="+", metavar="CONFIG", help="predictor configs; the first is the reference")
-    parser.add_argument("--eval", required=True, nargs="+", metavar="DATASET",
-                        help="held-out spillage dataset directory, or several scored as one set (each episode a bootstrap unit)")
+    held_out = parser.add_mutually_exclusive_group(required=True)
+    held_out.add_argument("--eval", nargs="+", metavar="DATASET",
+                          help="held-out spillage dataset directory, or several scored as one set (each episode a bootstrap unit)")
+    held_out.add_argument("--branches", nargs="+", metavar="RUN",
+                          help="run directories of `grits-lab evaluate` with one scoop.branch_plan and different "
+                               "scoop.branch_draw: score the chunk each executed at the branch plan, within each state")
+    parser.add_argument("--method", default="dp", metavar="METHOD",
+                        help="with --branches: whose rollout chunks to score (default dp)")
     parser.add_argument("--checkpoint", default="best", choices=["best", "last"], help="which checkpoint of each run (default: best)")
     parser.add_argument("--output-dir", metavar="DIR",
                         help="where the runs are and the comparison is written, to OUTPUT_DIR/comparison_<dataset> "
@@ -66,6 +74,32 @@ def _compare_runs(args: argparse.Namespace) -> int:
     return 0
 
 
+def _branches(args: argparse.Namespace, checkpoints: dict[str, Path], configs: list, label: str) -> int:
+    """`compare-predictors --branches RUN...`: the comparison within states, the draws' spread and each guide's pick."""
+    from grits_lab.io import write_text_atomic
+    from grits_lab.spillage.branches import branch_markdown, branch_predictions, branch_runs, outcome_spread, selection
+    from grits_lab.spillage.compare import compare_predictions, comparison_markdown, write_comparison
+
+    runs = branch_runs(args.branches, args.method)  # before any model runs
+    predictions = branch_predictions(checkpoints, args.branches, args.method, label)
+    comparison = compare_predictions(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed,
+                                     n_bins=configs[0].train.ece_bins, label=label, baselines=False)
+    import yaml
+
+    name = (yaml.safe_load((runs[0].path / "config.yaml").read_text()) or {}).get("run_id", runs[0].path.name)
+    out = Path(configs[0].output_dir) / f"comparison_branches_{name}_plan{runs[0].plan}_{args.method}_{label}"
+    described = f"{args.method}'s chunks at plan {runs[0].plan} of {', '.join(args.branches)}"
+    files = write_comparison(comparison, described, out)
+    spread = outcome_spread(predictions)
+    picked = selection(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed)
+    section = branch_markdown(spread, picked, runs[0].plan, label)
+    write_text_atomic(files[0], comparison_markdown(comparison, described) + "\n" + section)
+    write_text_atomic(out / "branch_selection.csv", picked.to_csv(index=False))
+    print(comparison_markdown(comparison, described) + "\n" + section)
+    print(f"written: {', '.join(str(f) for f in [*files, out / 'branch_selection.csv'])}")
+    return 0
+
+
 def _run(args: argparse.Namespace) -> int:
     import torch
 
@@ -94,6 +128,8 @@ def _run(args: argparse.Namespace) -> int:
         raise InputError(f"the predictors trained on different labels ({', '.join(f'{n}: {lb}' for n, lb in trained_on.items())}); "
                          "choose the one to score against with --label chunk or --label horizon")
     label = args.label or configs[0].data.label
+    if args.branches:
+        return _branches(args, checkpoints, configs, label)
     predictions = predict_all(checkpoints, args.eval, label=label)
     comparison = compare_predictions(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed, n_bins=configs[0].train.ece_bins, label=label)
     out = Path(configs[0].output_dir) / f"comparison_{'+'.join(Path(d).name for d in args.eval)}"

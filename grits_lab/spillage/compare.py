@@ -79,7 +79,7 @@ def compare_predictions(predictions: pd.DataFrame, models: list[str], n_resample
     rows = []
     for m in probs:
         row: dict[str, Any] = {"model": m, "kind": "baseline" if m in extra else "model", **point[m]}
-        if m not in extra and "chunk" in predictions.columns:
+        if m not in extra and "chunk" in predictions.columns and predictions["chunk"].nunique() > 1:
             row["spearman_position"] = spearman_with_position(probs[m], predictions)
         for metric in metrics:
             row[f"{metric}_lo"], row[f"{metric}_hi"] = _interval(boot[metric][m])
@@ -114,15 +114,19 @@ def _food_per_chunk(predictions: pd.DataFrame) -> np.ndarray:
 def within_strata(predictions: pd.DataFrame) -> dict[str, np.ndarray]:
     """The strata of the stratified AUROCs the chunks allow, `{metric: (n_chunks,) labels}`:
     "auroc_within" by food (strata_column), and "auroc_within_position" by food and the chunk's
-    index in its episode (by the index alone when the chunks are of one food), which asks what
-    guidance needs: of the chunks of one food at one point of the scoop, does the predictor rank
-    those that spill higher? Any score of the position alone is 0.5 there."""
+    index in its episode (by the index alone when the chunks are of one food; absent when every
+    chunk has one index), which asks what guidance needs: of the chunks of one food at one point of
+    the scoop, does the predictor rank those that spill higher? Any score of the position alone is
+    0.5 there. With a `state` column (a branch study), "auroc_within_state": over the pairs of the
+    policy's samples from one and the same state, the choice guidance makes."""
     out: dict[str, np.ndarray] = {}
     food = _food_per_chunk(predictions)
     if strata_column(predictions) is not None:
         out["auroc_within"] = food
-    if "chunk" in predictions.columns:
+    if "chunk" in predictions.columns and predictions["chunk"].nunique() > 1:
         out["auroc_within_position"] = np.asarray([f"{f}#{c}" for f, c in zip(food, predictions["chunk"].to_numpy())])
+    if "state" in predictions.columns:  # a branch study's draws (grits_lab/spillage/branches.py)
+        out["auroc_within_state"] = predictions["state"].astype(str).to_numpy()
     return out
 
 
@@ -199,7 +203,8 @@ def comparison_markdown(c: Comparison, dataset: str) -> str:
     ]
     stratum = strata_column(c.predictions)
     position = "AUROC within position" if stratum is None else f"AUROC within {stratum} and position"
-    names = {"auroc": "AUROC", "accuracy": "accuracy", "auroc_within": f"AUROC within {stratum}", "auroc_within_position": position}
+    names = {"auroc": "AUROC", "accuracy": "accuracy", "auroc_within": f"AUROC within {stratum}", "auroc_within_position": position,
+             "auroc_within_state": "AUROC within state"}
     metrics = [m for m in names if m in c.table.columns]
     spearman = "spearman_position" in c.table.columns
     header = ["model", *(f"{names[m]} [95 %]" for m in metrics[:2]), "ECE", *(f"{names[m]} [95 %]" for m in metrics[2:]),
@@ -228,6 +233,10 @@ def comparison_markdown(c: Comparison, dataset: str) -> str:
         notes.append(f"{position}: over the pairs of chunks {f'of the same {stratum} ' if stratum else ''}at the same index "
                      "in their episodes, so knowing how far into the scoop a chunk is earns nothing; any score of "
                      "the position alone is 0.5 there.")
+    if "auroc_within_state" in metrics:
+        notes.append("AUROC within state: over the pairs of the policy's samples executed from one and the same state "
+                     "(runs that share every step before the branch plan), so the state earns nothing and only "
+                     "what the sample does counts: the choice guidance makes.")
     if spearman:
         notes.append(f"Spearman with position: the rank correlation of P(spill) with the chunk's index in its episode"
                      f"{f', within each {stratum}, averaged by its chunks' if stratum else ''} (point estimate). Near -1 the "

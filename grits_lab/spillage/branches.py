@@ -1,0 +1,186 @@
+"""Guides scored where guidance acts: the policy's other samples from one and the same state.
+
+Runs of `grits-lab evaluate` on the same seeds that differ only in `scoop.branch_draw` (with one
+`scoop.branch_plan` k; docs/evaluation.md, "Branches from one state") share every step of an
+episode up to plan k and then execute another sample of the policy there. The chunk each run
+executes at plan k is one of the policy's alternatives from that state, and its label says what
+that choice led to. Guidance picks among (and moves) such samples, so what a guide must do is rank
+them within a state; the pooled AUROC also credits knowing which states spill.
+
+Per state (food, level, seed) the K draws give K outcomes of one state. `outcome_spread` says how
+often they disagree and how much of the label's variance lies within states; `selection` says how
+often a draw spills when each guide picks the draw it scores lowest, against the policy's own
+(draw 0) and the best any choice among the K could do.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from grits_lab.errors import InputError
+
+
+@dataclass(frozen=True)
+class BranchRun:
+    """One run directory of a branch study: its rollout-chunk dataset, branch plan and draw."""
+
+    path: Path
+    dataset: Path
+    plan: int
+    draw: int
+
+
+def branch_runs(runs: list[str | Path], method: str = "dp") -> list[BranchRun]:
+    """The runs of one branch study, in the order given. InputError, before any model runs, for
+    fewer than two runs, a run without `scoop.branch_plan` in its config.yaml or without
+    rollout chunks of `method`, runs that branch at different plans, or a draw listed twice."""
+    if len(runs) < 2:
+        raise InputError(f"--branches needs at least two runs of one branch plan (got {len(runs)})")
+    from grits_lab.evaluation.evaluation_run import ROLLOUT_CHUNKS_DIR
+
+    out = []
+    for run in map(Path, runs):
+        config = run / "config.yaml"
+        if not config.is_file():
+            raise InputError(f"{run}: no config.yaml; give run directories of `grits-lab evaluate`")
+        scoop = (yaml.safe_load(config.read_text()) or {}).get("scoop") or {}
+        if scoop.get("branch_plan") is None:
+            raise InputError(f"{run}: its config sets no `scoop.branch_plan`; a branch study's runs branch at one plan")
+        dataset = run / ROLLOUT_CHUNKS_DIR / method
+        if not dataset.is_dir():
+            raise InputError(f"{run}: no rollout chunks of method {method!r} at {dataset} (evaluate with rollout_chunks: true)")
+        out.append(BranchRun(run, dataset, int(scoop["branch_plan"]), int(scoop.get("branch_draw", 0))))
+    if len({r.plan for r in out}) > 1:
+        raise InputError("the runs branch at different plans: " + ", ".join(f"{r.path} at {r.plan}" for r in out))
+    draws = [r.draw for r in out]
+    if len(set(draws)) < len(draws):
+        raise InputError(f"a branch draw is listed twice: draws {draws} of {', '.join(str(r.path) for r in out)}")
+    return out
+
+
+def branch_predictions(checkpoints: dict[str, Path], runs: list[str | Path], method: str = "dp", label: str = "horizon") -> pd.DataFrame:
+    """Every checkpoint's P(spill) on the chunk each run executed at the branch plan: one row per
+    (state, draw) with `state` (the episode, the bootstrap unit), `draw`, `food`, `label` and `p_<model>`.
+
+    Only states every run holds are kept, and only states whose runs saw the same composite cloud
+    at the branch plan: a state whose clouds differ was not shared (the runs diverged before the
+    plan: other code, other CPU kernels) and is an InputError naming it.
+    """
+    from grits_lab.data.format import read_episode
+    from grits_lab.spillage.compare import predict_all
+
+    branches = branch_runs(runs, method)
+    plan = branches[0].plan
+    frame = predict_all(checkpoints, [b.dataset for b in branches], label=label)
+    parts = []
+    for b in branches:
+        prefix = f"{b.dataset}/"
+        part = frame[frame["episode"].str.startswith(prefix) & (frame["chunk"] == plan)].copy()
+        part["state"] = part["episode"].str.slice(len(prefix))
+        part["draw"] = b.draw
+        parts.append(part)
+    shared = set.intersection(*(set(p["state"]) for p in parts))
+    if not shared:
+        raise InputError(f"no episode reached plan {plan} in every run of {', '.join(str(b.path) for b in branches)}")
+    clouds: dict[str, np.ndarray] = {}
+    for b in branches:
+        for file in sorted(shared):
+            arrays, _ = read_episode(b.dataset / file)
+            cloud = np.asarray(arrays["chunk_cloud"][plan])
+            if file in clouds and not np.array_equal(clouds[file], cloud):
+                raise InputError(f"{b.path}: episode {file} saw another cloud at plan {plan} than {branches[0].path}: "
+                                 "the runs did not share the state (other code or CPU kernels?)")
+            clouds.setdefault(file, cloud)
+    out = pd.concat(parts, ignore_index=True)
+    out = out[out["state"].isin(shared)].copy()
+    out["episode"] = out["state"]
+    return out.sort_values(["state", "draw"], kind="stable").reset_index(drop=True)
+
+
+def outcome_spread(frame: pd.DataFrame) -> dict[str, Any]:
+    """How the draws of one state disagree, for the `label` column of `branch_predictions`.
+
+    states, draws (per state, the fewest), rate m (over every draw), mixed (states whose draws do not
+    all agree), all_spill, within = mean over states of the unbiased s (K - s) / (K (K - 1)) (s of K
+    draws spilled), an estimate of E[p (1 - p)] with p a state's chance of a spill, `within_share`:
+    the share of the label's variance m (1 - m) that lies within states (law of total variance,
+    mean of s (K - s) / K^2 over it: what a guide that sees the trajectory could rank and the state
+    alone cannot), and `ceiling_state_only`: the best AUROC any score of the state alone can reach
+    (grits_lab/report/outcome_ceiling.py, with v = within).
+    """
+    from grits_lab.report.outcome_ceiling import max_auroc
+
+    grouped = frame.groupby("state")["label"]
+    s, k = grouped.sum().to_numpy(dtype=np.float64), grouped.size().to_numpy(dtype=np.float64)
+    rate = float(frame["label"].mean())
+    within = float(np.mean(s * (k - s) / (k * (k - 1)))) if (k > 1).all() else float("nan")
+    total = float(np.mean(frame["label"].to_numpy(dtype=np.float64) ** 2)) - rate**2  # m (1 - m) for a 0/1 label
+    share = float(np.sum(s * (k - s) / k) / len(frame)) / total if total > 0 else float("nan")
+    return {"states": int(len(s)), "draws": int(k.min()), "rate": rate, "mixed": int(((s > 0) & (s < k)).sum()),
+            "all_spill": int((s == k).sum()), "within": within, "within_share": share,
+            "ceiling_state_only": max_auroc(rate, within) if 0 < rate < 1 else float("nan")}
+
+
+def selection(frame: pd.DataFrame, models: list[str], n_resamples: int = 1000, seed: int = 0) -> pd.DataFrame:
+    """Spill rate when each model picks, in every state, the draw it scores lowest (ties: the lowest
+    draw), beside the policy's own draw 0 (`own`) and the best choice among the draws (`best`: a
+    state spills only when every draw does). Rows: "own", "best", then one per model, with the rate,
+    its 95 % interval and the paired difference to `own` (picked minus own) from resampling states."""
+    states = sorted(frame["state"].unique())
+    idx = {s: i for i, s in enumerate(states)}
+    frame = frame.sort_values(["state", "draw"], kind="stable")
+    rows = frame["state"].map(idx).to_numpy()
+    y = frame["label"].to_numpy(dtype=np.float64)
+    own = np.full(len(states), np.nan)
+    first = frame["draw"].to_numpy() == frame["draw"].min()
+    own[rows[first]] = y[first]
+    per_state: dict[str, np.ndarray] = {"own": own, "best": np.array([y[rows == i].min() for i in range(len(states))])}
+    for m in models:
+        p = frame[f"p_{m}"].to_numpy(dtype=np.float64)
+        picked = np.empty(len(states))
+        for i in range(len(states)):
+            at = np.flatnonzero(rows == i)
+            picked[i] = y[at[np.argmin(p[at])]]
+        per_state[m] = picked
+    rng = np.random.default_rng(seed)
+    draws = rng.integers(0, len(states), (n_resamples, len(states)))
+    out = []
+    for name, values in per_state.items():
+        boot = values[draws].mean(axis=1)
+        diff = (values - per_state["own"])[draws].mean(axis=1)
+        row = {"choice": name, "rate": float(values.mean()), "rate_lo": float(np.percentile(boot, 2.5)), "rate_hi": float(np.percentile(boot, 97.5))}
+        if name != "own":
+            row.update(minus_own=float((values - per_state["own"]).mean()), minus_own_lo=float(np.percentile(diff, 2.5)),
+                       minus_own_hi=float(np.percentile(diff, 97.5)))
+        out.append(row)
+    return pd.DataFrame(out)
+
+
+def branch_markdown(spread: dict[str, Any], picked: pd.DataFrame, plan: int, label: str) -> str:
+    """The outcome spread and the selection table as a markdown section."""
+    from grits_lab.markdown import markdown_table
+
+    lines = [
+        f"## The draws of one state (plan {plan}, {label} label)",
+        "",
+        f"{spread['states']} states, at least {spread['draws']} draws each, spill rate {spread['rate']:.3f}. States whose draws "
+        f"disagree: {spread['mixed']} of {spread['states']}; whose draws all spill: {spread['all_spill']}. "
+        f"{spread['within_share']:.0%} of the label's variance lies within states (E[p(1-p)] {spread['within']:.3f}, "
+        f"p a state's chance of a spill); the best AUROC of any score of the state alone is {spread['ceiling_state_only']:.3f}.",
+        "",
+    ]
+    names = {"own": "the policy's own sample (draw 0)", "best": "the best of the draws (a state spills only if every draw does)"}
+    rows = []
+    for r in picked.to_dict("records"):
+        diff = "reference" if r["choice"] == "own" else f"{r['minus_own']:+.3f} [{r['minus_own_lo']:+.3f}, {r['minus_own_hi']:+.3f}]"
+        rows.append([names.get(r["choice"], f"picked by {r['choice']} (lowest P(spill))"), f"{r['rate']:.3f} [{r['rate_lo']:.3f}, {r['rate_hi']:.3f}]", diff])
+    lines.append(markdown_table(["choice in each state", "spill rate [95 %]", "minus the own sample [95 %]"], rows, right=2))
+    lines += ["", "Intervals from resampling states. A guide that ranks the draws of a state no better than chance picks "
+              "a draw that spills as often as the policy's own."]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,108 @@
+"""Branch studies: the policy's samples from one state, scored within the state (grits_lab/spillage/branches.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from grits_lab.errors import InputError
+from grits_lab.evaluation.evaluation_run import evaluate
+from grits_lab.spillage.branches import branch_predictions, branch_runs, outcome_spread, selection
+from tests.evaluation.eval_helpers import eval_config
+
+
+def test_the_spread_counts_disagreeing_states_and_the_within_state_variance():
+    """Two states of two draws: one whose draws disagree (s = 1 of 2: s (K - s) / (K (K - 1)) = 1/2),
+    one where both spill (0)."""
+    frame = pd.DataFrame({"state": ["a", "a", "b", "b"], "draw": [0, 1, 0, 1], "label": [1, 0, 1, 1]})
+    spread = outcome_spread(frame)
+    assert (spread["states"], spread["draws"], spread["mixed"], spread["all_spill"]) == (2, 2, 1, 1)
+    assert spread["rate"] == pytest.approx(0.75) and spread["within"] == pytest.approx(0.25)
+    assert spread["within_share"] == pytest.approx((1 * 1 / 2) / 4 / (0.75 * 0.25))  # sum s (K - s) / K over all draws, over m (1 - m)
+
+
+def test_a_guide_that_ranks_the_draws_picks_the_one_that_does_not_spill():
+    """Per state the pick is the draw of lowest P(spill): `right` picks the safe draw of state a,
+    `wrong` the spilling one; in b every draw spills. own = draw 0, best = the safest draw."""
+    frame = pd.DataFrame({"state": ["a", "a", "b", "b"], "draw": [0, 1, 0, 1], "label": [1, 0, 1, 1],
+                          "p_right": [0.9, 0.1, 0.5, 0.4], "p_wrong": [0.1, 0.9, 0.5, 0.4]})
+    table = selection(frame, ["right", "wrong"], n_resamples=200).set_index("choice")
+    assert table.loc["own", "rate"] == 1.0 and table.loc["best", "rate"] == 0.5
+    assert table.loc["right", "rate"] == 0.5 and table.loc["right", "minus_own"] == -0.5
+    assert table.loc["wrong", "rate"] == 1.0 and table.loc["wrong", "minus_own"] == 0.0
+    assert table.loc["right", "minus_own_lo"] <= -0.5 <= table.loc["right", "minus_own_hi"]
+
+
+def _branch_run(models: dict[str, str], root: Path, draw: int, **scoop) -> Path:
+    config = eval_config(models, root / f"draw{draw}", methods=["dp"], rollout_chunks=True, trials=2,
+                         scoop={"max_steps": 36, "min_steps": 36, "branch_plan": 1, "branch_draw": draw, **scoop})
+    assert (evaluate(config, progress=False)["error"] == "").all()
+    return Path(config.output_dir)
+
+
+def test_branch_runs_are_scored_at_their_plan_within_each_state_and_the_cli_writes_the_pick(models, tmp_path, capsys):
+    """Three draws of two episodes: one row per (state, draw), the chunk executed at the branch plan,
+    every draw of a state seen from the same cloud, a guide's P(spill) differing across draws; the
+    CLI writes the comparison with the within-state AUROC and the selection table."""
+    from grits_lab.cli import main
+
+    runs = [_branch_run(models, tmp_path, d) for d in (0, 1, 2)]
+    checkpoint = Path(models["predictor"])
+    frame = branch_predictions({"tiny": checkpoint}, runs, label="chunk")
+    assert len(frame) == 6 and frame["state"].nunique() == 2 and sorted(frame["draw"].unique()) == [0, 1, 2]
+    assert (frame["chunk"] == 1).all() and (frame["episode"] == frame["state"]).all()
+    assert frame.groupby("state")["p_tiny"].nunique().min() > 1  # another trajectory, another score
+
+    config = tmp_path / "tiny.yaml"
+    config.write_text(yaml.safe_dump({"name": "tiny", "output_dir": str(checkpoint.parent.parent),
+                                      "model": {"dp3": {"hidden_dims": [16, 32], "out_dim": 16}, "fusion_mlp": [32, 16]},
+                                      "data": {"dataset": "unused", "points_per_object": 16}}))
+    out = tmp_path / "compared"
+    out.mkdir()
+    (out / "tiny").symlink_to(checkpoint.parent)  # the trained run, where --output-dir looks for it
+    assert main(["compare-predictors", str(config), "--branches", *map(str, runs), "--label", "chunk", "--bootstrap", "100",
+                 "--output-dir", str(out)]) == 0
+    written = out / "comparison_branches_test_plan1_dp_chunk"  # the runs' run_id
+    markdown = (written / "predictor_comparison.md").read_text()
+    assert "AUROC within state" in markdown and "## The draws of one state (plan 1, chunk label)" in markdown
+    assert "picked by tiny (lowest P(spill))" in markdown
+    picked = pd.read_csv(written / "branch_selection.csv")
+    assert list(picked["choice"]) == ["own", "best", "tiny"]
+    own = frame[frame["draw"] == 0].sort_values("state")["label"].mean()
+    assert picked.set_index("choice").loc["own", "rate"] == pytest.approx(own)
+
+
+def test_branch_runs_that_cannot_be_one_study_are_refused_before_any_model_runs(models, tmp_path):
+    first = _branch_run(models, tmp_path, 0)
+    with pytest.raises(InputError, match="at least two runs"):
+        branch_runs([first])
+    with pytest.raises(InputError, match="listed twice"):
+        branch_runs([first, first])
+    other_plan = _branch_run(models, tmp_path / "plan2", 1, branch_plan=2)
+    with pytest.raises(InputError, match="different plans"):
+        branch_runs([first, other_plan])
+    plain = eval_config(models, tmp_path / "plain", methods=["dp"], rollout_chunks=True)
+    evaluate(plain, progress=False)
+    with pytest.raises(InputError, match="no `scoop.branch_plan`"):
+        branch_runs([first, Path(plain.output_dir)])
+    with pytest.raises(InputError, match="no rollout chunks of method 'grits'"):
+        branch_runs([first, other_plan], method="grits")
+
+
+def test_runs_that_did_not_share_the_state_are_refused_naming_the_episode(models, tmp_path):
+    """A run whose episode saw another cloud at the branch plan (here: another seed's episode under the
+    same name) did not branch from the same state."""
+    first, second = _branch_run(models, tmp_path, 0), _branch_run(models, tmp_path, 1)
+    from grits_lab.data.format import read_episode, write_episode
+
+    dataset = second / "rollout_chunks" / "dp"
+    files = sorted((dataset / "episodes").glob("*.npz"))
+    arrays, meta = read_episode(files[0])
+    arrays["chunk_cloud"] = np.asarray(arrays["chunk_cloud"]) + np.float16(0.01)
+    write_episode(dataset, files[0].stem, arrays, meta)
+    with pytest.raises(InputError, match=f"episode .*{files[0].stem}.* another cloud at plan 1"):
+        branch_predictions({"tiny": Path(models["predictor"])}, [first, second], label="chunk")
