@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -9,10 +10,55 @@ import pandas as pd
 import pytest
 import yaml
 
-from grits_lab.errors import InputError
+from grits_lab.errors import ConfigError, InputError
 from grits_lab.evaluation.evaluation_run import evaluate
 from grits_lab.spillage.branches import branch_predictions, branch_runs, outcome_spread, selection
 from tests.evaluation.eval_helpers import eval_config
+
+SCOOP = {"max_steps": 36, "min_steps": 36}
+
+
+@pytest.fixture(scope="module")
+def study(models, tmp_path_factory) -> dict[str, Path]:
+    """Run directories of dp on two episodes: unbranched ("plain"), and draws 0, 1, 2 of plan 1."""
+    root = tmp_path_factory.mktemp("branches")
+    runs = {}
+    for name, scoop in {"plain": {}, "draw0": {"branch_plan": 1}, "draw1": {"branch_plan": 1, "branch_draw": 1},
+                        "draw2": {"branch_plan": 1, "branch_draw": 2}}.items():
+        config = eval_config(models, root / name, methods=["dp"], rollout_chunks=True, trials=2, scoop={**SCOOP, **scoop})
+        assert (evaluate(config, progress=False)["error"] == "").all()
+        runs[name] = root / name
+    return runs
+
+
+def _episodes(run: Path) -> list[dict[str, np.ndarray]]:
+    from grits_lab.data.format import read_episode
+
+    return [read_episode(f)[0] for f in sorted((run / "rollout_chunks" / "dp" / "episodes").glob("*.npz"))]
+
+
+def test_a_branch_draw_shares_every_step_before_its_plan_and_samples_another_chunk_from_that_state(study, models, tmp_path):
+    """Draw 0 is the unbranched episode; draw 1 executes the same first chunk, sees the same cloud at
+    the branch plan and executes another sample there. A run directory holds one draw, and only
+    diffusion methods draw noise to branch on."""
+    records = {name: pd.read_parquet(run / "episodes.parquet") for name, run in study.items()}
+    assert set(records["plain"]["scoop_branch_plan"]) == {-1} and set(records["draw1"]["scoop_branch_plan"]) == {1}
+    assert set(records["draw0"]["scoop_branch_draw"]) == {0} and set(records["draw1"]["scoop_branch_draw"]) == {1}
+    first, branch = slice(0, 12), slice(12, 24)
+    for plain, own, other in zip(*(_episodes(study[n]) for n in ("plain", "draw0", "draw1"))):
+        np.testing.assert_array_equal(own["trajectory"], plain["trajectory"])
+        np.testing.assert_array_equal(other["trajectory"][first], own["trajectory"][first])
+        np.testing.assert_array_equal(other["chunk_cloud"][1], own["chunk_cloud"][1])  # one state
+        assert np.abs(other["trajectory"][branch, :3] - own["trajectory"][branch, :3]).max() > 1e-3
+    resumed = tmp_path / "draw0"
+    shutil.copytree(study["draw0"], resumed)
+    with pytest.raises(InputError, match=r"`scoop.branch_plan` 1 \(draw 0\)"):
+        evaluate(eval_config(models, resumed, methods=["dp"], rollout_chunks=True, trials=2,
+                             scoop={**SCOOP, "branch_plan": 1, "branch_draw": 2}), progress=False)
+    with pytest.raises(ConfigError, match="diffusion-policy method"):
+        eval_config(models, tmp_path, methods=["expert"], scoop={"branch_plan": 0})
+    with pytest.raises(ConfigError, match="scoop.branch_draw"):
+        eval_config(models, tmp_path, scoop={"branch_draw": 1})
 
 
 def test_the_spread_counts_disagreeing_states_and_the_within_state_variance():
@@ -37,20 +83,13 @@ def test_a_guide_that_ranks_the_draws_picks_the_one_that_does_not_spill():
     assert table.loc["right", "minus_own_lo"] <= -0.5 <= table.loc["right", "minus_own_hi"]
 
 
-def _branch_run(models: dict[str, str], root: Path, draw: int, **scoop) -> Path:
-    config = eval_config(models, root / f"draw{draw}", methods=["dp"], rollout_chunks=True, trials=2,
-                         scoop={"max_steps": 36, "min_steps": 36, "branch_plan": 1, "branch_draw": draw, **scoop})
-    assert (evaluate(config, progress=False)["error"] == "").all()
-    return Path(config.output_dir)
-
-
-def test_branch_runs_are_scored_at_their_plan_within_each_state_and_the_cli_writes_the_pick(models, tmp_path, capsys):
+def test_branch_runs_are_scored_at_their_plan_within_each_state_and_the_cli_writes_the_pick(study, models, tmp_path):
     """Three draws of two episodes: one row per (state, draw), the chunk executed at the branch plan,
-    every draw of a state seen from the same cloud, a guide's P(spill) differing across draws; the
-    CLI writes the comparison with the within-state AUROC and the selection table."""
+    a guide's P(spill) differing across the draws of a state; the CLI writes the comparison with
+    the within-state AUROC and the selection table."""
     from grits_lab.cli import main
 
-    runs = [_branch_run(models, tmp_path, d) for d in (0, 1, 2)]
+    runs = [study[f"draw{d}"] for d in (0, 1, 2)]
     checkpoint = Path(models["predictor"])
     frame = branch_predictions({"tiny": checkpoint}, runs, label="chunk")
     assert len(frame) == 6 and frame["state"].nunique() == 2 and sorted(frame["draw"].unique()) == [0, 1, 2]
@@ -76,33 +115,39 @@ def test_branch_runs_are_scored_at_their_plan_within_each_state_and_the_cli_writ
     assert picked.set_index("choice").loc["own", "rate"] == pytest.approx(own)
 
 
-def test_branch_runs_that_cannot_be_one_study_are_refused_before_any_model_runs(models, tmp_path):
-    first = _branch_run(models, tmp_path, 0)
+def _with_scoop(run: Path, where: Path, **scoop) -> Path:
+    """A copy of a run directory whose config.yaml says other scoop settings."""
+    shutil.copytree(run, where)
+    config = yaml.safe_load((where / "config.yaml").read_text())
+    config["scoop"].update(scoop)
+    (where / "config.yaml").write_text(yaml.safe_dump(config))
+    return where
+
+
+def test_branch_runs_that_cannot_be_one_study_are_refused_before_any_model_runs(study, tmp_path):
+    first = study["draw0"]
     with pytest.raises(InputError, match="at least two runs"):
         branch_runs([first])
     with pytest.raises(InputError, match="listed twice"):
         branch_runs([first, first])
-    other_plan = _branch_run(models, tmp_path / "plan2", 1, branch_plan=2)
     with pytest.raises(InputError, match="different plans"):
-        branch_runs([first, other_plan])
-    plain = eval_config(models, tmp_path / "plain", methods=["dp"], rollout_chunks=True)
-    evaluate(plain, progress=False)
+        branch_runs([first, _with_scoop(study["draw1"], tmp_path / "plan2", branch_plan=2)])
     with pytest.raises(InputError, match="no `scoop.branch_plan`"):
-        branch_runs([first, Path(plain.output_dir)])
+        branch_runs([first, study["plain"]])
     with pytest.raises(InputError, match="no rollout chunks of method 'grits'"):
-        branch_runs([first, other_plan], method="grits")
+        branch_runs([first, study["draw1"]], method="grits")
 
 
-def test_runs_that_did_not_share_the_state_are_refused_naming_the_episode(models, tmp_path):
-    """A run whose episode saw another cloud at the branch plan (here: another seed's episode under the
-    same name) did not branch from the same state."""
-    first, second = _branch_run(models, tmp_path, 0), _branch_run(models, tmp_path, 1)
+def test_runs_that_did_not_share_the_state_are_refused_naming_the_episode(study, models, tmp_path):
+    """A run whose episode saw another cloud at the branch plan did not branch from the same state."""
     from grits_lab.data.format import read_episode, write_episode
 
+    second = tmp_path / "draw1"
+    shutil.copytree(study["draw1"], second)
     dataset = second / "rollout_chunks" / "dp"
     files = sorted((dataset / "episodes").glob("*.npz"))
     arrays, meta = read_episode(files[0])
     arrays["chunk_cloud"] = np.asarray(arrays["chunk_cloud"]) + np.float16(0.01)
     write_episode(dataset, files[0].stem, arrays, meta)
     with pytest.raises(InputError, match=f"episode .*{files[0].stem}.* another cloud at plan 1"):
-        branch_predictions({"tiny": Path(models["predictor"])}, [first, second], label="chunk")
+        branch_predictions({"tiny": Path(models["predictor"])}, [study["draw0"], second], label="chunk")

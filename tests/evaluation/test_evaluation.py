@@ -248,36 +248,6 @@ def test_an_action_offset_moves_every_executed_scoop_action_rigidly_and_a_run_ho
         eval_config(models, tmp_path, scoop={"action_offset": -0.001})
 
 
-def test_a_branch_draw_shares_every_step_before_its_plan_and_samples_another_chunk_from_that_state(models, tmp_path):
-    """`scoop.branch_plan` / `branch_draw`: draw 0 is the unbranched episode; draw 1 executes the same
-    first chunk, sees the same cloud at the branch plan and executes another sample there. A run
-    directory holds one draw, and only diffusion methods draw noise to branch on."""
-    from grits_lab.data.format import read_episode
-    from grits_lab.errors import InputError
-
-    def run(name: str, **scoop):
-        config = eval_config(models, tmp_path / name, methods=["dp"], rollout_chunks=True, scoop={"max_steps": 36, "min_steps": 36, **scoop})
-        row = evaluate(config, progress=False).iloc[0]
-        return row, read_episode(next((tmp_path / name / "rollout_chunks" / "dp" / "episodes").glob("*.npz")))[0]
-
-    plain, plain_chunks = run("plain")
-    own, own_chunks = run("draw0", branch_plan=1)
-    other, other_chunks = run("draw1", branch_plan=1, branch_draw=1)
-    assert (plain["scoop_branch_plan"], own["scoop_branch_plan"], own["scoop_branch_draw"], other["scoop_branch_draw"]) == (-1, 1, 0, 1)
-    np.testing.assert_array_equal(own_chunks["trajectory"], plain_chunks["trajectory"])
-    first, branch = slice(0, 12), slice(12, 24)
-    np.testing.assert_array_equal(other_chunks["trajectory"][first], own_chunks["trajectory"][first])
-    np.testing.assert_array_equal(other_chunks["chunk_cloud"][1], own_chunks["chunk_cloud"][1])  # one state
-    assert np.abs(other_chunks["trajectory"][branch, :3] - own_chunks["trajectory"][branch, :3]).max() > 1e-3
-    with pytest.raises(InputError, match=r"`scoop.branch_plan` 1 \(draw 0\)"):
-        evaluate(eval_config(models, tmp_path / "draw0", methods=["dp"], rollout_chunks=True,
-                             scoop={"max_steps": 36, "min_steps": 36, "branch_plan": 1, "branch_draw": 2}), progress=False)
-    with pytest.raises(ConfigError, match="diffusion-policy method"):
-        eval_config(models, tmp_path, methods=["expert"], scoop={"branch_plan": 0})
-    with pytest.raises(ConfigError, match="scoop.branch_draw"):
-        eval_config(models, tmp_path, scoop={"branch_draw": 1})
-
-
 def test_the_weights_digest_names_the_model_whatever_path_the_checkpoint_stores(models, tmp_path):
     """A checkpoint trained into another folder stores other paths: another file digest, the same weights
     digest; another weight changes it. The run's provenance.json records both, and the CPU kernels it was trained on."""
