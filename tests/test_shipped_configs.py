@@ -29,8 +29,6 @@ def _loader(path: Path):
         return load_collect_config
     if name.startswith("evaluate") or "methods" in data:
         return load_evaluation_config
-    if name.startswith("scoop_branch_"):  # a draw of the branch study, merged onto it
-        return lambda p: load_evaluation_config(ROOT / "experiments" / "dp_branches_brim.yaml", dict(load_yaml(p)))
     if name.startswith(("transfer_", "sim_", "scoop_", "guide_")):  # an override of the transfer, the world, the scoop or the guide, merged onto the protocol
         return lambda p: load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(p)))
     if name.startswith("dp_rollouts_brim_"):  # an override of the brim rollouts (more trials), merged onto them

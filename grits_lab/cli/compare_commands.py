@@ -77,13 +77,15 @@ def _compare_runs(args: argparse.Namespace) -> int:
 def _branches(args: argparse.Namespace, checkpoints: dict[str, Path], configs: list, label: str) -> int:
     """`compare-predictors --branches RUN...`: the comparison within states, the draws' spread and each guide's pick."""
     from grits_lab.io import write_text_atomic
-    from grits_lab.spillage.branches import branch_markdown, branch_predictions, branch_runs, outcome_spread, selection
+    from grits_lab.spillage.branches import SCOOP_ONLY_HORIZON, branch_markdown, branch_predictions, branch_runs, outcome_spread, selection
     from grits_lab.spillage.compare import compare_predictions, comparison_markdown, write_comparison
 
     runs = branch_runs(args.branches, args.method)  # before any model runs
     predictions = branch_predictions(checkpoints, args.branches, args.method, label)
     comparison = compare_predictions(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed,
                                      n_bins=configs[0].train.ece_bins, label=label, baselines=False)
+    if label == "horizon" and not runs[0].delivers:
+        comparison.label_meaning = SCOOP_ONLY_HORIZON
     import yaml
 
     name = (yaml.safe_load((runs[0].path / "config.yaml").read_text()) or {}).get("run_id", runs[0].path.name)

@@ -27,6 +27,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--methods", nargs="+", default=None, help="evaluate only these methods (default: the config's)")
     parser.add_argument("--output-dir", metavar="DIR", default=None, help="run directory (overrides the config's output_dir)")
     parser.add_argument("--address", help="Ray cluster address (overrides executor.address and RAY_ADDRESS)")
+    parser.add_argument("--branch-draw", type=int, metavar="N", default=None,
+                        help="scoop.branch_draw: another sample of the policy at the config's scoop.branch_plan, from "
+                             "the same state (docs/evaluation.md, \"Branches from one state\"); give each draw its own --output-dir")
     parser.add_argument("--serial", action="store_true", help="run in this process instead of on Ray")
     parser.add_argument("--restart", action="store_true", help="discard the run directory's records and start over")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -77,6 +80,8 @@ def _run(args: argparse.Namespace) -> int:
         overrides["executor"] = {**overrides.get("executor", {}), "address": args.address}
     if args.serial:
         overrides["executor"] = {**overrides.get("executor", {}), "backend": "serial"}
+    if args.branch_draw is not None:
+        overrides["scoop"] = {**overrides.get("scoop", {}), "branch_draw": args.branch_draw}
     config = load_evaluation_config(args.config, overrides)
     records = evaluate(config, progress=not args.no_progress, restart=args.restart)
     print(summary_table(records))

@@ -34,6 +34,7 @@ class BranchRun:
     dataset: Path
     plan: int
     draw: int
+    delivers: bool  # the run played the transfer and pour (its horizon label runs to delivery, else to the scoop's end)
 
 
 def branch_runs(runs: list[str | Path], method: str = "dp") -> list[BranchRun]:
@@ -49,15 +50,20 @@ def branch_runs(runs: list[str | Path], method: str = "dp") -> list[BranchRun]:
         config = run / "config.yaml"
         if not config.is_file():
             raise InputError(f"{run}: no config.yaml; give run directories of `grits-lab evaluate`")
-        scoop = (yaml.safe_load(config.read_text()) or {}).get("scoop") or {}
+        data = yaml.safe_load(config.read_text()) or {}
+        scoop = data.get("scoop") or {}
         if scoop.get("branch_plan") is None:
             raise InputError(f"{run}: its config sets no `scoop.branch_plan`; a branch study's runs branch at one plan")
         dataset = run / ROLLOUT_CHUNKS_DIR / method
         if not dataset.is_dir():
             raise InputError(f"{run}: no rollout chunks of method {method!r} at {dataset} (evaluate with rollout_chunks: true)")
-        out.append(BranchRun(run, dataset, int(scoop["branch_plan"]), int(scoop.get("branch_draw", 0))))
+        delivers = bool((data.get("transfer") or {}).get("enabled", True))
+        out.append(BranchRun(run, dataset, int(scoop["branch_plan"]), int(scoop.get("branch_draw", 0)), delivers))
     if len({r.plan for r in out}) > 1:
         raise InputError("the runs branch at different plans: " + ", ".join(f"{r.path} at {r.plan}" for r in out))
+    if len({r.delivers for r in out}) > 1:
+        raise InputError("some runs play the transfer and pour and some do not (transfer.enabled): their horizon labels end "
+                         "at different points: " + ", ".join(f"{r.path}: {r.delivers}" for r in out))
     draws = [r.draw for r in out]
     if len(set(draws)) < len(draws):
         raise InputError(f"a branch draw is listed twice: draws {draws} of {', '.join(str(r.path) for r in out)}")
@@ -160,6 +166,9 @@ def selection(frame: pd.DataFrame, models: list[str], n_resamples: int = 1000, s
                        minus_own_hi=float(np.percentile(diff, 97.5)))
         out.append(row)
     return pd.DataFrame(out)
+
+
+SCOOP_ONLY_HORIZON = "food spilled from the chunk's first action to the end of the scoop: these runs stop after it (transfer.enabled false)"
 
 
 def branch_markdown(spread: dict[str, Any], picked: pd.DataFrame, plan: int, label: str) -> str:

@@ -49,6 +49,7 @@ class Comparison:
     n_resamples: int
     n_bins: int = 10  # reliability bins, as for the ECE in the table
     label: str = "chunk"  # what the `label` column says: "chunk" or "horizon" (grits_lab/data/chunk_labels.py)
+    label_meaning: str | None = None  # in words, where LABEL_MEANING's does not hold (a horizon that ends with the scoop)
 
 
 def compare_predictions(predictions: pd.DataFrame, models: list[str], n_resamples: int = 2000, seed: int = 0, n_bins: int = 10,
@@ -196,7 +197,7 @@ def comparison_markdown(c: Comparison, dataset: str) -> str:
         f"# Spillage predictors on {dataset}",
         "",
         f"{len(c.predictions)} chunks from {n_eps} episodes, labelled by the {c.label} label "
-        f"({LABEL_MEANING[c.label]}), spill rate {c.predictions['label'].mean():.3f}. "
+        f"({c.label_meaning or LABEL_MEANING[c.label]}), spill rate {c.predictions['label'].mean():.3f}. "
         f"95 % intervals from {c.n_resamples} paired bootstrap resamples of whole episodes; "
         f"differences are {ref} minus the row's model (p: share of resamples in which {ref} is not better).",
         "",

@@ -115,11 +115,11 @@ def test_branch_runs_are_scored_at_their_plan_within_each_state_and_the_cli_writ
     assert picked.set_index("choice").loc["own", "rate"] == pytest.approx(own)
 
 
-def _with_scoop(run: Path, where: Path, **scoop) -> Path:
-    """A copy of a run directory whose config.yaml says other scoop settings."""
+def _with_config(run: Path, where: Path, section: str, **changes) -> Path:
+    """A copy of a run directory whose config.yaml says other settings in `section`."""
     shutil.copytree(run, where)
     config = yaml.safe_load((where / "config.yaml").read_text())
-    config["scoop"].update(scoop)
+    config[section].update(changes)
     (where / "config.yaml").write_text(yaml.safe_dump(config))
     return where
 
@@ -131,7 +131,9 @@ def test_branch_runs_that_cannot_be_one_study_are_refused_before_any_model_runs(
     with pytest.raises(InputError, match="listed twice"):
         branch_runs([first, first])
     with pytest.raises(InputError, match="different plans"):
-        branch_runs([first, _with_scoop(study["draw1"], tmp_path / "plan2", branch_plan=2)])
+        branch_runs([first, _with_config(study["draw1"], tmp_path / "plan2", "scoop", branch_plan=2)])
+    with pytest.raises(InputError, match="transfer.enabled"):
+        branch_runs([first, _with_config(study["draw1"], tmp_path / "scoop_only", "transfer", enabled=False)])
     with pytest.raises(InputError, match="no `scoop.branch_plan`"):
         branch_runs([first, study["plain"]])
     with pytest.raises(InputError, match="no rollout chunks of method 'grits'"):
@@ -151,3 +153,17 @@ def test_runs_that_did_not_share_the_state_are_refused_naming_the_episode(study,
     write_episode(dataset, files[0].stem, arrays, meta)
     with pytest.raises(InputError, match=f"episode .*{files[0].stem}.* another cloud at plan 1"):
         branch_predictions({"tiny": Path(models["predictor"])}, [study["draw0"], second], label="chunk")
+
+
+def test_evaluate_branch_draw_sets_the_draw_and_is_refused_without_a_branch_plan(capsys, tmp_path):
+    """`--branch-draw N` is scoop.branch_draw: on a config without scoop.branch_plan it is one line and
+    exit 2 before anything is written; on the branch study's config it is the draw the run records."""
+    from grits_lab.cli import main
+    from grits_lab.evaluation.evaluation_config import load_evaluation_config
+
+    out = tmp_path / "never"
+    assert main(["evaluate", "experiments/evaluate_quick.yaml", "--branch-draw", "1", "--output-dir", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "`scoop.branch_draw` must be 0 unless scoop.branch_plan" in err[0] and not out.exists()
+    study = load_evaluation_config("experiments/dp_branches_brim.yaml", {"scoop": {"branch_draw": 3}})
+    assert (study.scoop.branch_plan, study.scoop.branch_draw, study.transfer.enabled) == (1, 3, False)
