@@ -40,7 +40,8 @@ class BranchRun:
 def branch_runs(runs: list[str | Path], method: str = "dp") -> list[BranchRun]:
     """The runs of one branch study, in the order given. InputError, before any model runs, for
     fewer than two runs, a run without `scoop.branch_plan` in its config.yaml or without
-    rollout chunks of `method`, runs that branch at different plans, or a draw listed twice."""
+    rollout chunks of `method`, runs that branch at different plans or whose horizons end at
+    different stages (`transfer.enabled`), a draw listed twice, or no draw 0."""
     if len(runs) < 2:
         raise InputError(f"--branches needs at least two runs of one branch plan (got {len(runs)})")
     from grits_lab.evaluation.evaluation_run import ROLLOUT_CHUNKS_DIR
@@ -67,6 +68,8 @@ def branch_runs(runs: list[str | Path], method: str = "dp") -> list[BranchRun]:
     draws = [r.draw for r in out]
     if len(set(draws)) < len(draws):
         raise InputError(f"a branch draw is listed twice: draws {draws} of {', '.join(str(r.path) for r in out)}")
+    if 0 not in draws:
+        raise InputError(f"no run is draw 0, the policy's own episode, which the picks are compared with (draws {draws})")
     return out
 
 

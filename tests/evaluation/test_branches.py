@@ -136,6 +136,8 @@ def test_branch_runs_that_cannot_be_one_study_are_refused_before_any_model_runs(
         branch_runs([first, _with_config(study["draw1"], tmp_path / "scoop_only", "transfer", enabled=False)])
     with pytest.raises(InputError, match="no `scoop.branch_plan`"):
         branch_runs([first, study["plain"]])
+    with pytest.raises(InputError, match="no run is draw 0"):
+        branch_runs([study["draw1"], study["draw2"]])
     with pytest.raises(InputError, match="no rollout chunks of method 'grits'"):
         branch_runs([first, study["draw1"]], method="grits")
 
