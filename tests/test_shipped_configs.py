@@ -31,6 +31,8 @@ def _loader(path: Path):
         return load_evaluation_config
     if name.startswith(("transfer_", "sim_", "scoop_", "guide_")):  # an override of the transfer, the world, the scoop or the guide, merged onto the protocol
         return lambda p: load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(p)))
+    if name.startswith("dp_branches_brim_"):  # an override of the branch study (another plan), merged onto it
+        return lambda p: load_evaluation_config(ROOT / "experiments" / "dp_branches_brim.yaml", dict(load_yaml(p)))
     if name.startswith("dp_rollouts_brim_"):  # an override of the brim rollouts (more trials), merged onto them
         return lambda p: load_evaluation_config(ROOT / "experiments" / "dp_rollouts_brim.yaml", dict(load_yaml(p)))
     if name.startswith("policy"):

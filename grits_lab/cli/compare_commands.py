@@ -89,7 +89,8 @@ def _branches(args: argparse.Namespace, checkpoints: dict[str, Path], configs: l
     import yaml
 
     name = (yaml.safe_load((runs[0].path / "config.yaml").read_text()) or {}).get("run_id", runs[0].path.name)
-    out = Path(configs[0].output_dir) / f"comparison_branches_{name}_plan{runs[0].plan}_{args.method}_{label}"
+    nudged = "_nudged" if any(r.offset_m for r in runs) else ""  # replays of a sample beside (or instead of) other samples
+    out = Path(configs[0].output_dir) / f"comparison_branches_{name}_plan{runs[0].plan}{nudged}_{args.method}_{label}"
     described = f"{args.method}'s chunks at plan {runs[0].plan} of {', '.join(args.branches)}"
     files = write_comparison(comparison, described, out)
     spread = outcome_spread(predictions)

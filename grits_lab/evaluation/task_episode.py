@@ -47,7 +47,8 @@ def run_scoop(env: ScoopEnv, controller: Controller, scene: EpisodeScene, histor
     scoop's executed actions (T, 9) (see `rollout_chunk_episode`).
 
     `settings.action_offset` > 0 moves every action the simulator executes (not the history the
-    controller reads, which keeps what it asked for) by `settings.offset_vector(scene.seed)`.
+    controller reads, which keeps what it asked for) by `settings.offset_vector(scene.seed)`; with
+    `settings.branch_plan` set, only from that plan on (a nudged replay of the same sample from one state).
     """
     cloud_steps = int(getattr(controller, "cloud_steps", 0))
     image_steps = int(getattr(controller, "image_steps", 0))
@@ -63,7 +64,8 @@ def run_scoop(env: ScoopEnv, controller: Controller, scene: EpisodeScene, histor
         if image_steps and index not in history.rgbd:
             history.rgbd[index] = scene.rgbd(tuple(encoder.image_size), encoder.cameras)
 
-    offset = settings.offset_vector(scene.seed)
+    nudge = settings.offset_vector(scene.seed)
+    offset = nudge if settings.branch_plan is None else np.zeros_like(nudge)  # before the branch plan: shared
     controller.reset(scene)
     steps, plans, completion_step = 0, 0, -1
     plan_times: list[float] = []
@@ -82,6 +84,8 @@ def run_scoop(env: ScoopEnv, controller: Controller, scene: EpisodeScene, histor
             stop_reason = "controller_done"
             break
         plans += 1
+        if settings.branch_plan is not None and plans - 1 >= settings.branch_plan:
+            offset = nudge
         plan_times.append(chunk.plan_time_s)
         if chunk.diagnostics:
             diagnostics.append(chunk.diagnostics)

@@ -66,6 +66,8 @@ class ScoopSettings:
     # from the episode's own. Runs on the same seeds that differ only in `branch_draw` share every
     # step before that plan and then execute another sample of the diffusion policy from one and the
     # same state (docs/evaluation.md, "Branches from one state"). Draw 0 is the unbranched episode.
+    # With a branch plan, `action_offset` moves the actions from that plan on only: the same sample,
+    # nudged, from the same state.
     branch_plan: int | None = None
     branch_draw: int = 0
 

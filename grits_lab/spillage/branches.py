@@ -7,6 +7,11 @@ executes at plan k is one of the policy's alternatives from that state, and its 
 that choice led to. Guidance picks among (and moves) such samples, so what a guide must do is rank
 them within a state; the pooled AUROC also credits knowing which states spill.
 
+A run with `scoop.action_offset` as well replays its draw's sample nudged from the branch plan
+on, by a distance no observation resolves: draw 0 and such replays of it are K outcomes of one
+sample from one state, whose spread is the chance part no guide can rank (docs/evaluation.md,
+"Branches from one state").
+
 Per state (food, level, seed) the K draws give K outcomes of one state. `outcome_spread` says how
 often they disagree and how much of the label's variance lies within states; `selection` says how
 often a draw spills when each guide picks the draw it scores lowest, against the policy's own
@@ -28,13 +33,24 @@ from grits_lab.errors import InputError
 
 @dataclass(frozen=True)
 class BranchRun:
-    """One run directory of a branch study: its rollout-chunk dataset, branch plan and draw."""
+    """One run directory of a branch study: its rollout-chunk dataset, branch plan, draw and nudge."""
 
     path: Path
     dataset: Path
     plan: int
     draw: int
     delivers: bool  # the run played the transfer and pour (its horizon label runs to delivery, else to the scoop's end)
+    offset_m: float = 0.0  # scoop.action_offset from the branch plan on (0: not nudged)
+    offset_draw: int = 0  # scoop.action_offset_draw (0 when not nudged)
+
+    @property
+    def key(self) -> tuple[int, float, int]:
+        return (self.draw, self.offset_m, self.offset_draw)
+
+    @property
+    def own(self) -> bool:
+        """The policy's own episode: draw 0, not nudged."""
+        return self.key == (0, 0.0, 0)
 
 
 def branch_runs(runs: list[str | Path], method: str = "dp") -> list[BranchRun]:
@@ -59,23 +75,28 @@ def branch_runs(runs: list[str | Path], method: str = "dp") -> list[BranchRun]:
         if not dataset.is_dir():
             raise InputError(f"{run}: no rollout chunks of method {method!r} at {dataset} (evaluate with rollout_chunks: true)")
         delivers = bool((data.get("transfer") or {}).get("enabled", True))
-        out.append(BranchRun(run, dataset, int(scoop["branch_plan"]), int(scoop.get("branch_draw", 0)), delivers))
+        offset = float(scoop.get("action_offset", 0.0) or 0.0)
+        out.append(BranchRun(run, dataset, int(scoop["branch_plan"]), int(scoop.get("branch_draw", 0)), delivers, offset,
+                             int(scoop.get("action_offset_draw", 0)) if offset else 0))
     if len({r.plan for r in out}) > 1:
         raise InputError("the runs branch at different plans: " + ", ".join(f"{r.path} at {r.plan}" for r in out))
     if len({r.delivers for r in out}) > 1:
         raise InputError("some runs play the transfer and pour and some do not (transfer.enabled): their horizon labels end "
                          "at different points: " + ", ".join(f"{r.path}: {r.delivers}" for r in out))
-    draws = [r.draw for r in out]
-    if len(set(draws)) < len(draws):
-        raise InputError(f"a branch draw is listed twice: draws {draws} of {', '.join(str(r.path) for r in out)}")
-    if 0 not in draws:
-        raise InputError(f"no run is draw 0, the policy's own episode, which the picks are compared with (draws {draws})")
+    keys = [r.key for r in out]
+    if len(set(keys)) < len(keys):
+        raise InputError("a branch draw is listed twice (draw, action_offset, action_offset_draw): "
+                         + ", ".join(f"{r.path}: {r.key}" for r in out))
+    if not any(r.own for r in out):
+        raise InputError(f"no run is draw 0 without a nudge, the policy's own episode, which the picks are compared with "
+                         f"(draw, action_offset, action_offset_draw: {keys})")
     return out
 
 
 def branch_predictions(checkpoints: dict[str, Path], runs: list[str | Path], method: str = "dp", label: str = "horizon") -> pd.DataFrame:
     """Every checkpoint's P(spill) on the chunk each run executed at the branch plan: one row per
-    (state, draw) with `state` (the episode, the bootstrap unit), `draw`, `food`, `label` and `p_<model>`.
+    (state, run) with `state` (the episode, the bootstrap unit), `branch` (the run's index in `runs`),
+    `draw`, `offset_m`, `own` (draw 0, not nudged), `food`, `label` and `p_<model>`.
 
     Only states every run holds are kept, and only states whose runs saw the same composite cloud
     at the branch plan: a state whose clouds differ was not shared (the runs diverged before the
@@ -88,11 +109,11 @@ def branch_predictions(checkpoints: dict[str, Path], runs: list[str | Path], met
     plan = branches[0].plan
     frame = predict_all(checkpoints, [b.dataset for b in branches], label=label)
     parts = []
-    for b in branches:
+    for i, b in enumerate(branches):
         prefix = f"{b.dataset}/"
         part = frame[frame["episode"].str.startswith(prefix) & (frame["chunk"] == plan)].copy()
         part["state"] = part["episode"].str.slice(len(prefix))
-        part["draw"] = b.draw
+        part["branch"], part["draw"], part["offset_m"], part["own"] = i, b.draw, b.offset_m, b.own
         parts.append(part)
     shared = set.intersection(*(set(p["state"]) for p in parts))
     if not shared:
@@ -109,7 +130,7 @@ def branch_predictions(checkpoints: dict[str, Path], runs: list[str | Path], met
     out = pd.concat(parts, ignore_index=True)
     out = out[out["state"].isin(shared)].copy()
     out["episode"] = out["state"]
-    return out.sort_values(["state", "draw"], kind="stable").reset_index(drop=True)
+    return out.sort_values(["state", "branch"], kind="stable").reset_index(drop=True)
 
 
 def outcome_spread(frame: pd.DataFrame) -> dict[str, Any]:
@@ -137,17 +158,17 @@ def outcome_spread(frame: pd.DataFrame) -> dict[str, Any]:
 
 
 def selection(frame: pd.DataFrame, models: list[str], n_resamples: int = 1000, seed: int = 0) -> pd.DataFrame:
-    """Spill rate when each model picks, in every state, the draw it scores lowest (ties: the lowest
-    draw), beside the policy's own draw 0 (`own`) and the best choice among the draws (`best`: a
-    state spills only when every draw does). Rows: "own", "best", then one per model, with the rate,
+    """Spill rate when each model picks, in every state, the draw it scores lowest (ties: the first
+    run given), beside the policy's own draw 0 (`own`, the rows whose `own` is true) and the best
+    choice among the draws (`best`: a state spills only when every draw does). Rows: "own", "best", then one per model, with the rate,
     its 95 % interval and the paired difference to `own` (picked minus own) from resampling states."""
     states = sorted(frame["state"].unique())
     idx = {s: i for i, s in enumerate(states)}
-    frame = frame.sort_values(["state", "draw"], kind="stable")
+    frame = frame.sort_values(["state", "branch"], kind="stable")
     rows = frame["state"].map(idx).to_numpy()
     y = frame["label"].to_numpy(dtype=np.float64)
     own = np.full(len(states), np.nan)
-    first = frame["draw"].to_numpy() == frame["draw"].min()
+    first = frame["own"].to_numpy(dtype=bool)
     own[rows[first]] = y[first]
     per_state: dict[str, np.ndarray] = {"own": own, "best": np.array([y[rows == i].min() for i in range(len(states))])}
     for m in models:
@@ -171,7 +192,7 @@ def selection(frame: pd.DataFrame, models: list[str], n_resamples: int = 1000, s
     return pd.DataFrame(out)
 
 
-SCOOP_ONLY_HORIZON = "food spilled from the chunk's first action to the end of the scoop: these runs stop after it (transfer.enabled false)"
+SCOOP_ONLY_HORIZON = "food spilled from the chunk's first action to the end of the scoop, where these runs stop: transfer.enabled is false"
 
 
 def branch_markdown(spread: dict[str, Any], picked: pd.DataFrame, plan: int, label: str) -> str:

@@ -74,7 +74,7 @@ def test_the_spread_counts_disagreeing_states_and_the_within_state_variance():
 def test_a_guide_that_ranks_the_draws_picks_the_one_that_does_not_spill():
     """Per state the pick is the draw of lowest P(spill): `right` picks the safe draw of state a,
     `wrong` the spilling one; in b every draw spills. own = draw 0, best = the safest draw."""
-    frame = pd.DataFrame({"state": ["a", "a", "b", "b"], "draw": [0, 1, 0, 1], "label": [1, 0, 1, 1],
+    frame = pd.DataFrame({"state": ["a", "a", "b", "b"], "branch": [0, 1, 0, 1], "own": [True, False, True, False], "label": [1, 0, 1, 1],
                           "p_right": [0.9, 0.1, 0.5, 0.4], "p_wrong": [0.1, 0.9, 0.5, 0.4]})
     table = selection(frame, ["right", "wrong"], n_resamples=200).set_index("choice")
     assert table.loc["own", "rate"] == 1.0 and table.loc["best", "rate"] == 0.5
@@ -136,7 +136,7 @@ def test_branch_runs_that_cannot_be_one_study_are_refused_before_any_model_runs(
         branch_runs([first, _with_config(study["draw1"], tmp_path / "scoop_only", "transfer", enabled=False)])
     with pytest.raises(InputError, match="no `scoop.branch_plan`"):
         branch_runs([first, study["plain"]])
-    with pytest.raises(InputError, match="no run is draw 0"):
+    with pytest.raises(InputError, match="no run is draw 0 without a nudge"):
         branch_runs([study["draw1"], study["draw2"]])
     with pytest.raises(InputError, match="no rollout chunks of method 'grits'"):
         branch_runs([first, study["draw1"]], method="grits")
@@ -169,3 +169,29 @@ def test_evaluate_branch_draw_sets_the_draw_and_is_refused_without_a_branch_plan
     assert len(err) == 1 and "`scoop.branch_draw` must be 0 unless scoop.branch_plan" in err[0] and not out.exists()
     study = load_evaluation_config("experiments/dp_branches_brim.yaml", {"scoop": {"branch_draw": 3}})
     assert (study.scoop.branch_plan, study.scoop.branch_draw, study.transfer.enabled) == (1, 3, False)
+
+
+def test_a_nudged_replay_shares_the_state_and_the_sample_and_moves_only_from_the_branch_plan(study, models, tmp_path):
+    """With a branch plan, `scoop.action_offset` moves the actions from that plan on only: the first
+    chunk is draw 0's, the branch chunk is draw 0's sample moved by the offset; the study takes it as
+    another run of the same state, and refuses it twice."""
+    offset = 0.003
+    config = eval_config(models, tmp_path / "nudged", methods=["dp"], rollout_chunks=True, trials=2,
+                         scoop={**SCOOP, "branch_plan": 1, "action_offset": offset})
+    records = evaluate(config, progress=False)
+    assert set(records["scoop_action_offset_m"]) == {offset} and set(records["scoop_branch_draw"]) == {0}
+    from grits_lab.policies.control import ScoopSettings
+
+    seeds = records.sort_values("trial")["seed"].astype(int)  # episode files sort by trial, as records do
+    for own, nudged, seed in zip(_episodes(study["draw0"]), _episodes(tmp_path / "nudged"), seeds):
+        np.testing.assert_array_equal(nudged["trajectory"][:12], own["trajectory"][:12])
+        np.testing.assert_array_equal(nudged["chunk_cloud"][1], own["chunk_cloud"][1])
+        shift = nudged["trajectory"][12:24].astype(np.float64) - own["trajectory"][12:24]  # the same sample, moved
+        expected = ScoopSettings(action_offset=offset).offset_vector(seed)
+        np.testing.assert_allclose(shift, np.broadcast_to(expected, shift.shape), atol=1e-6)
+    runs = branch_runs([study["draw0"], tmp_path / "nudged", study["draw1"]])
+    assert [r.own for r in runs] == [True, False, False] and runs[1].key == (0, offset, 0)
+    frame = branch_predictions({"tiny": Path(models["predictor"])}, [study["draw0"], tmp_path / "nudged"], label="chunk")
+    assert list(frame.groupby("state")["own"].sum()) == [1, 1]
+    with pytest.raises(InputError, match="listed twice"):
+        branch_runs([study["draw0"], tmp_path / "nudged", tmp_path / "nudged"])
