@@ -217,6 +217,10 @@ def test_a_golden_record_is_reproduced(name, tmp_path):
     assert golden["protocol"] == PROTOCOL, (
         f"{name} was made under {golden['protocol']}, this code runs {PROTOCOL}: regenerate it ({COMMAND})")
     differences = _differences(golden["record"], now)
+    added = [d for d in differences if d.endswith(": not in the golden record")]
+    assert len(added) < len(differences) or not added, (
+        f"{name} gained {len(added)} columns ({', '.join(d.split(':')[0] for d in added)}) beside unchanged values: "
+        f"a new column keeps {PROTOCOL} (docs/protocol.md); regenerate: {COMMAND}")
     assert not differences, (
         f"{name} moved ({len(differences)} values, first: {differences[0]}): this change moves results of {PROTOCOL}. "
         f"Bump PROTOCOL_VERSION in grits_lab/versions.py to {PROTOCOL_VERSION + 1}, add scoop-v{PROTOCOL_VERSION + 1} "

@@ -77,7 +77,7 @@ def _compare_runs(args: argparse.Namespace) -> int:
 def _branches(args: argparse.Namespace, checkpoints: dict[str, Path], configs: list, label: str) -> int:
     """`compare-predictors --branches RUN...`: the comparison within states, the draws' spread and each guide's pick."""
     from grits_lab.io import write_text_atomic
-    from grits_lab.spillage.branches import SCOOP_ONLY_HORIZON, branch_markdown, branch_predictions, branch_runs, outcome_spread, selection
+    from grits_lab.report.branches import SCOOP_ONLY_HORIZON, branch_markdown, branch_predictions, branch_runs, outcome_spread, selection
     from grits_lab.spillage.compare import compare_predictions, comparison_markdown, write_comparison
 
     runs = branch_runs(args.branches, args.method)  # before any model runs

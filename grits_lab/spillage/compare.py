@@ -126,7 +126,7 @@ def within_strata(predictions: pd.DataFrame) -> dict[str, np.ndarray]:
         out["auroc_within"] = food
     if "chunk" in predictions.columns and predictions["chunk"].nunique() > 1:
         out["auroc_within_position"] = np.asarray([f"{f}#{c}" for f, c in zip(food, predictions["chunk"].to_numpy())])
-    if "state" in predictions.columns:  # a branch study's draws (grits_lab/spillage/branches.py)
+    if "state" in predictions.columns:  # a branch study's draws (grits_lab/report/branches.py)
         out["auroc_within_state"] = predictions["state"].astype(str).to_numpy()
     return out
 

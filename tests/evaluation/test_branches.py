@@ -1,4 +1,4 @@
-"""Branch studies: the policy's samples from one state, scored within the state (grits_lab/spillage/branches.py)."""
+"""Branch studies: the policy's samples from one state, scored within the state (grits_lab.report.branches.py)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import yaml
 
 from grits_lab.errors import ConfigError, InputError
 from grits_lab.evaluation.evaluation_run import evaluate
-from grits_lab.spillage.branches import branch_predictions, branch_runs, outcome_spread, selection
+from grits_lab.report.branches import branch_predictions, branch_runs, outcome_spread, selection
 from tests.evaluation.eval_helpers import eval_config
 
 SCOOP = {"max_steps": 36, "min_steps": 36}
