@@ -25,6 +25,8 @@ and the ceiling with a 95 % interval from resampling episodes.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pandas as pd
 
@@ -35,18 +37,24 @@ def max_auroc(rate: float, noise: float, *, grid: int = 21, starts: int = 4, see
     """The largest AUROC of any score against a binary outcome of mean `rate` (m, in (0, 1)) whose
     chance part is `noise` (v = E[p (1 - p)], >= 0), over distributions of p on a grid of `grid`
     values in [0, 1] with m added; v above m (1 - m), which no distribution reaches, is taken as
-    m (1 - m). NaN for a rate of 0 or 1 (nothing to rank). Deterministic for a given `seed`."""
-    from scipy.optimize import minimize
-
+    m (1 - m). NaN for a rate of 0 or 1 (nothing to rank). Deterministic for a given `seed`, and
+    remembered per argument tuple (a bootstrap of paired episodes meets the same (m, v) often)."""
     if not 0.0 < rate < 1.0:
         return float("nan")
-    noise = min(max(float(noise), 0.0), rate * (1.0 - rate))
+    return _max_auroc(float(rate), min(max(float(noise), 0.0), rate * (1.0 - rate)), grid, starts, seed)
+
+
+@functools.lru_cache(maxsize=4096)
+def _max_auroc(rate: float, noise: float, grid: int, starts: int, seed: int) -> float:
+    from scipy.optimize import minimize
+
     p = np.unique(np.append(np.linspace(0.0, 1.0, grid), rate))
     wins = np.outer(p, 1.0 - p) * ((p[:, None] > p[None, :]) + 0.5 * np.eye(len(p)))
     sym = wins + wins.T
-    constraints = [{"type": "eq", "fun": lambda w: w.sum() - 1.0},
-                   {"type": "eq", "fun": lambda w: w @ p - rate},
-                   {"type": "eq", "fun": lambda w: w @ (p * (1.0 - p)) - noise}]
+    ones, spread = np.ones_like(p), p * (1.0 - p)
+    constraints = [{"type": "eq", "fun": lambda w: w.sum() - 1.0, "jac": lambda w: ones},
+                   {"type": "eq", "fun": lambda w: w @ p - rate, "jac": lambda w: p},
+                   {"type": "eq", "fun": lambda w: w @ spread - noise, "jac": lambda w: spread}]
     rng = np.random.default_rng(seed)
     best = 0.5 if np.isclose(noise, rate * (1.0 - rate)) else 0.0
     for _ in range(starts):
