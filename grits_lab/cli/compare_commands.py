@@ -24,7 +24,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "the draws of a state disagree and how often each guide's pick spills (docs/predictor.md, \"Within one state\")."
         ),
     )
-    parser.add_argument("configs", nargs="+", metavar="CONFIG", help="predictor configs; the first is the reference")
+    parser.add_argument("configs", nargs="*", metavar="CONFIG",
+                        help="predictor configs; the first is the reference (none with --branches: the draws' spread alone)")
     held_out = parser.add_mutually_exclusive_group(required=True)
     held_out.add_argument("--eval", nargs="+", metavar="DATASET",
                           help="held-out spillage dataset directory, or several scored as one set (each episode a bootstrap unit)")
@@ -82,23 +83,32 @@ def _branches(args: argparse.Namespace, checkpoints: dict[str, Path], configs: l
 
     runs = branch_runs(args.branches, args.method)  # before any model runs
     predictions = branch_predictions(checkpoints, args.branches, args.method, label)
-    comparison = compare_predictions(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed,
-                                     n_bins=configs[0].train.ece_bins, label=label, baselines=False)
-    if label == "horizon" and not runs[0].delivers:
-        comparison.label_meaning = SCOOP_ONLY_HORIZON
     import yaml
 
     name = (yaml.safe_load((runs[0].path / "config.yaml").read_text()) or {}).get("run_id", runs[0].path.name)
     nudged = "_nudged" if any(r.offset_m for r in runs) else ""  # replays of a sample beside (or instead of) other samples
-    out = Path(configs[0].output_dir) / f"comparison_branches_{name}_plan{runs[0].plan}{nudged}_{args.method}_{label}"
+    root = Path(args.output_dir or (configs[0].output_dir if configs else runs[0].path.parent))
+    out = root / f"comparison_branches_{name}_plan{runs[0].plan}{nudged}_{args.method}_{label}"
     described = f"{args.method}'s chunks at plan {runs[0].plan} of {', '.join(args.branches)}"
-    files = write_comparison(comparison, described, out)
     spread = outcome_spread(predictions)
     picked = selection(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed)
     section = branch_markdown(spread, picked, runs[0].plan, label)
-    write_text_atomic(files[0], comparison_markdown(comparison, described) + "\n" + section)
+    if checkpoints:
+        comparison = compare_predictions(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed,
+                                         n_bins=configs[0].train.ece_bins, label=label, baselines=False)
+        if label == "horizon" and not runs[0].delivers:
+            comparison.label_meaning = SCOOP_ONLY_HORIZON
+        files = write_comparison(comparison, described, out)
+        text = comparison_markdown(comparison, described) + "\n" + section
+    else:  # the draws' spread alone: no model scores them
+        from grits_lab.io import ensure_writable_dir
+
+        files = [ensure_writable_dir(out) / "branch_spread.md", out / "branch_labels.csv"]
+        text = f"# The draws of one state: {described}\n\n" + section
+        write_text_atomic(files[1], predictions.to_csv(index=False))
+    write_text_atomic(files[0], text)
     write_text_atomic(out / "branch_selection.csv", picked.to_csv(index=False))
-    print(comparison_markdown(comparison, described) + "\n" + section)
+    print(text)
     print(f"written: {', '.join(str(f) for f in [*files, out / 'branch_selection.csv'])}")
     return 0
 
@@ -114,6 +124,10 @@ def _run(args: argparse.Namespace) -> int:
 
     if args.bootstrap < 100:
         raise InputError(f"--bootstrap must be at least 100 (got {args.bootstrap})")
+    if not args.configs:
+        if not args.branches:
+            raise InputError("give at least one predictor CONFIG (only --branches runs without one: the draws' spread alone)")
+        return _branches(args, {}, [], args.label or "horizon")
     checkpoints: dict[str, Path] = {}
     configs = [load_config(path, PredictorConfig) for path in args.configs]
     for path, config in zip(args.configs, configs):

@@ -100,14 +100,18 @@ def branch_predictions(checkpoints: dict[str, Path], runs: list[str | Path], met
 
     Only states every run holds are kept, and only states whose runs saw the same composite cloud
     at the branch plan: a state whose clouds differ was not shared (the runs diverged before the
-    plan: other code, other CPU kernels) and is an InputError naming it.
+    plan: other code, other CPU kernels) and is an InputError naming it. With no checkpoints the
+    frame holds the labels alone (what `outcome_spread` and the own and best rows of `selection` need).
     """
     from grits_lab.data.format import read_episode
     from grits_lab.spillage.compare import predict_all
 
     branches = branch_runs(runs, method)
     plan = branches[0].plan
-    frame = predict_all(checkpoints, [b.dataset for b in branches], label=label)
+    if checkpoints:
+        frame = predict_all(checkpoints, [b.dataset for b in branches], label=label)
+    else:
+        frame = _labels_at(branches, plan, label)
     parts = []
     for i, b in enumerate(branches):
         prefix = f"{b.dataset}/"
@@ -131,6 +135,24 @@ def branch_predictions(checkpoints: dict[str, Path], runs: list[str | Path], met
     out = out[out["state"].isin(shared)].copy()
     out["episode"] = out["state"]
     return out.sort_values(["state", "branch"], kind="stable").reset_index(drop=True)
+
+
+def _labels_at(branches: list[BranchRun], plan: int, label: str) -> pd.DataFrame:
+    """`episode` (dataset-prefixed, as predict_all names several datasets' episodes), `chunk`,
+    `food` and `label` of every run's chunk at `plan`, read from the rollout chunks without a model."""
+    from grits_lab.data.chunk_labels import LABEL_ARRAYS
+    from grits_lab.data.format import read_episode
+    from grits_lab.spillage.chunk_dataset import check_spillage_dataset
+
+    rows = []
+    for b in branches:
+        index = check_spillage_dataset(b.dataset, label=label, label_key="--label")
+        foods = dict(zip(index["file"].astype(str), index["food"].astype(str))) if "food" in index.columns else {}
+        for file in sorted(index["file"].astype(str)):
+            labels = read_episode(b.dataset / file, keys=[LABEL_ARRAYS[label]])[0][LABEL_ARRAYS[label]]
+            if len(labels) > plan:
+                rows.append({"episode": f"{b.dataset}/{file}", "chunk": plan, "food": foods.get(file, ""), "label": np.int8(labels[plan])})
+    return pd.DataFrame(rows, columns=["episode", "chunk", "food", "label"])
 
 
 def outcome_spread(frame: pd.DataFrame) -> dict[str, Any]:

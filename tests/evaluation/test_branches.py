@@ -115,6 +115,29 @@ def test_branch_runs_are_scored_at_their_plan_within_each_state_and_the_cli_writ
     assert picked.set_index("choice").loc["own", "rate"] == pytest.approx(own)
 
 
+def test_without_a_model_the_spread_reads_the_same_labels_and_the_cli_writes_own_and_best(study, models, tmp_path, capsys):
+    """No CONFIG: the labels come from the rollout chunks alone, equal to those the model path reads,
+    and the CLI writes the spread with the own and best rows only."""
+    from grits_lab.cli import main
+
+    runs = [study[f"draw{d}"] for d in (0, 1, 2)]
+    alone = branch_predictions({}, runs, label="horizon")
+    scored = branch_predictions({"tiny": Path(models["predictor"])}, runs, label="horizon")
+    columns = ["state", "branch", "draw", "own", "food", "label"]
+    pd.testing.assert_frame_equal(alone[columns], scored[columns], check_dtype=False)
+    assert main(["compare-predictors", "--branches", *map(str, runs), "--bootstrap", "100", "--output-dir", str(tmp_path)]) == 0
+    written = tmp_path / "comparison_branches_test_plan1_dp_horizon"
+    assert "## The draws of one state (plan 1, horizon label)" in (written / "branch_spread.md").read_text()
+    picked = pd.read_csv(written / "branch_selection.csv").set_index("choice")
+    assert list(picked.index) == ["own", "best"]
+    by_state = alone.groupby("state")["label"]
+    assert picked.loc["best", "rate"] == pytest.approx(by_state.min().mean())
+    assert picked.loc["own", "rate"] == pytest.approx(alone[alone["own"]].sort_values("state")["label"].mean())
+    capsys.readouterr()
+    assert main(["compare-predictors", "--eval", str(runs[0])]) == 2
+    assert "give at least one predictor CONFIG" in capsys.readouterr().err
+
+
 def _with_config(run: Path, where: Path, section: str, **changes) -> Path:
     """A copy of a run directory whose config.yaml says other settings in `section`."""
     shutil.copytree(run, where)
