@@ -77,7 +77,7 @@ def _compare_runs(args: argparse.Namespace) -> int:
 
 def _branches(args: argparse.Namespace, checkpoints: dict[str, Path], configs: list, label: str) -> int:
     """`compare-predictors --branches RUN...`: the comparison within states, the draws' spread and each guide's pick."""
-    from grits_lab.io import write_text_atomic
+    from grits_lab.io import ensure_writable_dir, write_text_atomic
     from grits_lab.report.branches import SCOOP_ONLY_HORIZON, branch_markdown, branch_predictions, branch_runs, outcome_spread, selection
     from grits_lab.spillage.compare import compare_predictions, comparison_markdown, write_comparison
 
@@ -101,8 +101,6 @@ def _branches(args: argparse.Namespace, checkpoints: dict[str, Path], configs: l
         files = write_comparison(comparison, described, out)
         text = comparison_markdown(comparison, described) + "\n" + section
     else:  # the draws' spread alone: no model scores them
-        from grits_lab.io import ensure_writable_dir
-
         files = [ensure_writable_dir(out) / "branch_spread.md", out / "branch_labels.csv"]
         text = f"# The draws of one state: {described}\n\n" + section
         write_text_atomic(files[1], predictions.to_csv(index=False))

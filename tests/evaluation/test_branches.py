@@ -1,4 +1,4 @@
-"""Branch studies: the policy's samples from one state, scored within the state (grits_lab.report.branches.py)."""
+"""Branch studies: the policy's samples from one state, scored within the state (grits_lab/report/branches.py)."""
 
 from __future__ import annotations
 
