@@ -98,7 +98,9 @@ def checkpoint_digests(paths: dict[str, dict[str, str]]) -> dict[str, str]:
 
 
 def failed_episode_record(spec: EpisodeSpec, error: str, wall_time_s: float) -> dict[str, Any]:
-    """The record of an episode that raised or whose worker died: every outcome False, the error kept."""
+    """The record of an episode that raised or whose worker died: every outcome False, the error kept,
+    and the run's scoop diagnostics (`ScoopSettings.record_columns`), so that resuming the run finds
+    every record made under its own settings."""
     p: EpisodeParams = spec.params["evaluation"]
     rho, s = guidance_columns(p.method, p.config)
     return {
@@ -106,7 +108,7 @@ def failed_episode_record(spec: EpisodeSpec, error: str, wall_time_s: float) -> 
         "trial": p.trial, "seed": spec.seed, "task_success": False, "spillage": False, "scoop_failure": False,
         "scoop_success": False, "spilled_before_scoop": False, "n_particles": -1, "spilled": -1, "scooped": -1,
         "transferred": -1, "rho": rho, "s": s, "error": error or "unknown error", "wall_time_s": wall_time_s,
-        **{f"checkpoint_{k}": d for k, d in p.digests.items()},
+        **p.config.scoop.record_columns(), **{f"checkpoint_{k}": d for k, d in p.digests.items()},
     }
 
 
@@ -224,14 +226,18 @@ def _refuse_other_checkpoints(records_path: Path, done: list[dict[str, Any]], pa
 def _refuse_other_scoop_diagnostics(records_path: Path, done: list[dict[str, Any]], scoop: ScoopSettings) -> None:
     """Records whose scoop ran with another `scoop.action_offset` (or `action_offset_draw`), or another
     `scoop.branch_plan` / `branch_draw`, are not resumed under this one (a run directory holds one of
-    each; records from before the columns ran without any): InputError naming both."""
+    each; records from before the columns ran without any). A failed episode's record without the
+    columns says nothing of them: earlier code wrote none there. InputError naming both."""
     want = scoop.record_columns()
     defaults = ScoopSettings().record_columns()
 
     def recorded(r: dict[str, Any]) -> tuple:
         return tuple(type(want[c])(r[c]) if _present(r.get(c)) else defaults[c] for c in want)
 
-    other = sorted({recorded(r) for r in done} - {tuple(want.values())})
+    def unstated(r: dict[str, Any]) -> bool:
+        return _present(r.get("error")) and str(r["error"]) != "" and not any(_present(r.get(c)) for c in want)
+
+    other = sorted({recorded(r) for r in done if not unstated(r)} - {tuple(want.values())})
     if not other:
         return
     offset, draw, plan, branch = other[0]

@@ -4,20 +4,24 @@ as finished, and the command exits 1 with one line naming how many failed and th
 from __future__ import annotations
 
 import pandas as pd
+import pytest
 import yaml
 
 from grits_lab.cli import main
 from tests.sim.test_unsettled_food import BOULDERS
 
 
-def test_evaluate_with_episodes_that_raise_keeps_their_records_and_exits_1_in_one_line(tmp_path, capsys):
+@pytest.mark.parametrize("scoop", [{}, {"action_offset": 0.0005, "action_offset_draw": 1}], ids=["plain", "nudged"])
+def test_evaluate_with_episodes_that_raise_keeps_their_records_and_exits_1_in_one_line(scoop, tmp_path, capsys):
+    """A run with scoop diagnostics (`scoop.action_offset`) records them on its failed episodes too, so the
+    rerun resumes it instead of refusing the records as another setting's."""
     foods = tmp_path / "boulders.yaml"
     foods.write_text(BOULDERS)  # six 5 cm spheres: every reset refuses them
     run = tmp_path / "run"
     config = tmp_path / "evaluate.yaml"
     config.write_text(yaml.safe_dump({
         "run_id": "boulders", "output_dir": str(run), "seed": 0, "methods": ["rule_based"], "foods": ["boulders"],
-        "levels": ["low"], "trials": 2, "sim": {"foods_file": str(foods)},
+        "levels": ["low"], "trials": 2, "sim": {"foods_file": str(foods)}, "scoop": scoop,
     }))
     records_path = run / "episodes.parquet"
     first = None
@@ -33,7 +37,34 @@ def test_evaluate_with_episodes_that_raise_keeps_their_records_and_exits_1_in_on
         records = pd.read_parquet(records_path)
         assert sorted(records["trial"]) == [0, 1]
         assert records["error"].str.contains("came to rest outside the source bowl").all()
+        assert (records["scoop_action_offset_m"] == scoop.get("action_offset", 0.0)).all()
+        assert (records["scoop_action_offset_draw"] == scoop.get("action_offset_draw", 0)).all()
         assert " err" in out and "rule_based" in out  # the summary table still printed, on stdout
         if first is not None:  # nothing re-run: the very records of the first run (wall times included)
             pd.testing.assert_frame_equal(records, first)
         first = records
+
+
+def test_failed_records_of_earlier_code_without_scoop_columns_are_resumed_under_any_setting(tmp_path, capsys):
+    """Earlier code wrote no scoop-diagnostic columns on a failed episode's record: such a record says
+    nothing of the run's `scoop.action_offset`, so a nudged run resumes it; a finished record of
+    another setting is still refused."""
+    foods = tmp_path / "boulders.yaml"
+    foods.write_text(BOULDERS)
+    run = tmp_path / "run"
+    config = tmp_path / "evaluate.yaml"
+    config.write_text(yaml.safe_dump({
+        "run_id": "boulders", "output_dir": str(run), "seed": 0, "methods": ["rule_based"], "foods": ["boulders"],
+        "levels": ["low"], "trials": 1, "sim": {"foods_file": str(foods)}, "scoop": {"action_offset": 0.0005},
+    }))
+    assert main(["evaluate", str(config), "--serial", "--no-progress"]) == 1
+    records_path = run / "episodes.parquet"
+    old = pd.read_parquet(records_path).drop(columns=["scoop_action_offset_m", "scoop_action_offset_draw",
+                                                       "scoop_branch_plan", "scoop_branch_draw"])
+    old.to_parquet(records_path)
+    capsys.readouterr()
+    assert main(["evaluate", str(config), "--serial", "--no-progress"]) == 1  # resumed: the same failure, nothing refused
+    assert "episodes failed" in capsys.readouterr().err
+    old.assign(error="").to_parquet(records_path)  # a finished episode without the columns ran with no offset
+    assert main(["evaluate", str(config), "--serial", "--no-progress"]) == 2
+    assert "scoop.action_offset" in capsys.readouterr().err
