@@ -179,11 +179,34 @@ def outcome_spread(frame: pd.DataFrame) -> dict[str, Any]:
             "ceiling_state_only": max_auroc(rate, within) if 0 < rate < 1 else float("nan")}
 
 
+def samples_and_replays(frame: pd.DataFrame) -> tuple[list[int], list[int]]:
+    """The `branch` indices of the policy's samples (runs without a nudge: draw 0 and other draws) and
+    of the replays of its own sample (draw 0, nudged or not), each cut to the first k in the order
+    given, k the smaller count, so that the best of either is a best of k. ([], []) unless the runs
+    hold at least one other draw and one nudged replay (or the frame names no `draw` and `offset_m`)."""
+    if not {"draw", "offset_m"} <= set(frame.columns):
+        return [], []
+    runs = frame.drop_duplicates("branch").sort_values("branch")
+    samples = runs.loc[runs["offset_m"] == 0, "branch"].tolist()
+    replays = runs.loc[runs["draw"] == 0, "branch"].tolist()
+    if len(samples) < 2 or len(replays) < 2:
+        return [], []
+    k = min(len(samples), len(replays))
+    return samples[:k], replays[:k]
+
+
 def selection(frame: pd.DataFrame, models: list[str], n_resamples: int = 1000, seed: int = 0) -> pd.DataFrame:
     """Spill rate when each model picks, in every state, the draw it scores lowest (ties: the first
     run given), beside the policy's own draw 0 (`own`, the rows whose `own` is true) and the best
     choice among the draws (`best`: a state spills only when every draw does). Rows: "own", "best", then one per model, with the rate,
-    its 95 % interval and the paired difference to `own` (picked minus own) from resampling states."""
+    its 95 % interval and the paired difference to `own` (picked minus own) from resampling states.
+
+    When the runs hold both other draws and nudged replays of draw 0 (`samples_and_replays`), two
+    rows come after "best": "best_samples", the best of k of the policy's samples, and
+    "best_replays", the best of k replays of its own sample, the chance floor at k runs; the
+    first also holds `minus_replays` (and its interval): what choosing among samples removes beyond
+    what k tries of one sample do by chance.
+    """
     states = sorted(frame["state"].unique())
     idx = {s: i for i, s in enumerate(states)}
     frame = frame.sort_values(["state", "branch"], kind="stable")
@@ -193,6 +216,12 @@ def selection(frame: pd.DataFrame, models: list[str], n_resamples: int = 1000, s
     first = frame["own"].to_numpy(dtype=bool)
     own[rows[first]] = y[first]
     per_state: dict[str, np.ndarray] = {"own": own, "best": np.array([y[rows == i].min() for i in range(len(states))])}
+    samples, replays = samples_and_replays(frame)
+    if samples:
+        branch = frame["branch"].to_numpy()
+        for name, among in (("best_samples", samples), ("best_replays", replays)):
+            keep = np.isin(branch, among)
+            per_state[name] = np.array([y[(rows == i) & keep].min() for i in range(len(states))])
     for m in models:
         p = frame[f"p_{m}"].to_numpy(dtype=np.float64)
         picked = np.empty(len(states))
@@ -210,6 +239,11 @@ def selection(frame: pd.DataFrame, models: list[str], n_resamples: int = 1000, s
         if name != "own":
             row.update(minus_own=float((values - per_state["own"]).mean()), minus_own_lo=float(np.percentile(diff, 2.5)),
                        minus_own_hi=float(np.percentile(diff, 97.5)))
+        if name == "best_samples":
+            gap = values - per_state["best_replays"]
+            boot_gap = gap[draws].mean(axis=1)
+            row.update(k=len(samples), minus_replays=float(gap.mean()), minus_replays_lo=float(np.percentile(boot_gap, 2.5)),
+                       minus_replays_hi=float(np.percentile(boot_gap, 97.5)))
         out.append(row)
     return pd.DataFrame(out)
 
@@ -231,11 +265,21 @@ def branch_markdown(spread: dict[str, Any], picked: pd.DataFrame, plan: int, lab
         "",
     ]
     names = {"own": "the policy's own sample (draw 0)", "best": "the best of the draws (a state spills only if every draw does)"}
+    k = picked.set_index("choice")["k"].get("best_samples") if "k" in picked.columns else None
+    if k is not None:
+        names["best"] = "the best of every run given (samples and replays)"
+        names["best_samples"] = f"the best of {k:.0f} of the policy's samples (draw 0 and other draws)"
+        names["best_replays"] = f"the best of {k:.0f} runs of its own sample (draw 0 and nudged replays): chance alone"
     rows = []
     for r in picked.to_dict("records"):
         diff = "reference" if r["choice"] == "own" else f"{r['minus_own']:+.3f} [{r['minus_own_lo']:+.3f}, {r['minus_own_hi']:+.3f}]"
         rows.append([names.get(r["choice"], f"picked by {r['choice']} (lowest P(spill))"), f"{r['rate']:.3f} [{r['rate_lo']:.3f}, {r['rate_hi']:.3f}]", diff])
     lines.append(markdown_table(["choice in each state", "spill rate [95 %]", "minus the own sample [95 %]"], rows, right=2))
+    if k is not None:
+        r = picked.set_index("choice").loc["best_samples"]
+        lines += ["", f"Best of {k:.0f} samples minus best of {k:.0f} replays, paired by state: {r['minus_replays']:+.3f} "
+                  f"[{r['minus_replays_lo']:+.3f}, {r['minus_replays_hi']:+.3f}]: what choosing among the policy's samples "
+                  "removes beyond what as many tries of one sample remove by chance."]
     lines += ["", "Intervals from resampling states. A guide that ranks the draws of a state no better than chance picks "
               "a draw that spills as often as the policy's own."]
     return "\n".join(lines) + "\n"

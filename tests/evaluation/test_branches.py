@@ -83,6 +83,30 @@ def test_a_guide_that_ranks_the_draws_picks_the_one_that_does_not_spill():
     assert table.loc["right", "minus_own_lo"] <= -0.5 <= table.loc["right", "minus_own_hi"]
 
 
+def test_the_best_of_k_samples_is_set_against_the_best_of_k_replays_of_the_own_sample():
+    """Runs: 0 the own sample, 1 another draw, 2 a nudged replay of draw 0, 3 a third draw. k = 2 (two
+    replays): samples {0, 1}, replays {0, 2}; run 3 counts in `best` only. State a: a sample avoids the
+    spill and the replay does not (-1); b: only run 3 avoids it (0 for both bests, 0 for `best`);
+    c: draw 0 is safe (0). Mean gap -1/3."""
+    from grits_lab.report.branches import branch_markdown, samples_and_replays
+
+    frame = pd.DataFrame({"state": np.repeat(["a", "b", "c"], 4), "branch": [0, 1, 2, 3] * 3, "draw": [0, 1, 0, 2] * 3,
+                          "offset_m": [0, 0, 0.0005, 0] * 3, "own": [True, False, False, False] * 3,
+                          "label": [1, 0, 1, 0, 1, 1, 1, 0, 0, 1, 1, 1]})
+    assert samples_and_replays(frame) == ([0, 1], [0, 2])
+    table = selection(frame, [], n_resamples=200).set_index("choice")
+    assert list(table.index) == ["own", "best", "best_samples", "best_replays"]
+    assert table.loc["best", "rate"] == 0.0 and table.loc["own", "rate"] == pytest.approx(2 / 3)
+    assert table.loc["best_samples", "rate"] == pytest.approx(1 / 3) and table.loc["best_replays", "rate"] == pytest.approx(2 / 3)
+    assert table.loc["best_samples", "minus_replays"] == pytest.approx(-1 / 3) and table.loc["best_samples", "k"] == 2
+    assert table.loc["best_samples", "minus_replays_lo"] <= -1 / 3 <= table.loc["best_samples", "minus_replays_hi"]
+    text = branch_markdown(outcome_spread(frame), table.reset_index(), 1, "horizon")
+    assert "the best of 2 runs of its own sample" in text and "paired by state: -0.333" in text
+    draws_only = frame[frame["branch"] != 2]  # no replay: no such rows
+    assert samples_and_replays(draws_only) == ([], [])
+    assert list(selection(draws_only, [], n_resamples=100)["choice"]) == ["own", "best"]
+
+
 def test_branch_runs_are_scored_at_their_plan_within_each_state_and_the_cli_writes_the_pick(study, models, tmp_path):
     """Three draws of two episodes: one row per (state, draw), the chunk executed at the branch plan,
     a guide's P(spill) differing across the draws of a state; the CLI writes the comparison with
@@ -218,3 +242,17 @@ def test_a_nudged_replay_shares_the_state_and_the_sample_and_moves_only_from_the
     assert list(frame.groupby("state")["own"].sum()) == [1, 1]
     with pytest.raises(InputError, match="listed twice"):
         branch_runs([study["draw0"], tmp_path / "nudged", tmp_path / "nudged"])
+    from grits_lab.cli import main
+
+    # draws 0 and 1 beside draw 0 and its replay: the best of two samples against the best of two replays
+    assert main(["compare-predictors", "--branches", str(study["draw0"]), str(tmp_path / "nudged"), str(study["draw1"]),
+                 "--bootstrap", "100", "--output-dir", str(tmp_path / "spread")]) == 0
+    written = tmp_path / "spread" / "comparison_branches_test_plan1_nudged_dp_horizon"
+    picked = pd.read_csv(written / "branch_selection.csv").set_index("choice")
+    labels = branch_predictions({}, [study["draw0"], tmp_path / "nudged", study["draw1"]], label="horizon")
+    best = {name: labels[labels["branch"].isin(among)].groupby("state")["label"].min().mean()
+            for name, among in (("best_samples", [0, 2]), ("best_replays", [0, 1]))}
+    assert picked.loc["best_samples", "rate"] == pytest.approx(best["best_samples"])
+    assert picked.loc["best_replays", "rate"] == pytest.approx(best["best_replays"])
+    assert picked.loc["best_samples", "minus_replays"] == pytest.approx(best["best_samples"] - best["best_replays"])
+    assert "best of 2 samples minus best of 2 replays" in (written / "branch_spread.md").read_text().lower()
