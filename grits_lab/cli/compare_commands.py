@@ -78,10 +78,12 @@ def _compare_runs(args: argparse.Namespace) -> int:
 def _branches(args: argparse.Namespace, checkpoints: dict[str, Path], configs: list, label: str) -> int:
     """`compare-predictors --branches RUN...`: the comparison within states, the draws' spread and each guide's pick."""
     from grits_lab.io import ensure_writable_dir, write_text_atomic
-    from grits_lab.report.branches import SCOOP_ONLY_HORIZON, branch_markdown, branch_predictions, branch_runs, outcome_spread, selection
+    from grits_lab.report.branches import (SCOOP_ONLY_HORIZON, branch_markdown, branch_predictions, branch_runs, check_model_names,
+                                           outcome_spread, selection)
     from grits_lab.spillage.compare import compare_predictions, comparison_markdown, write_comparison
 
     runs = branch_runs(args.branches, args.method)  # before any model runs
+    check_model_names(list(checkpoints))
     predictions = branch_predictions(checkpoints, args.branches, args.method, label)
     import yaml
 

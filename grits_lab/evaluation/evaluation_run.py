@@ -223,21 +223,28 @@ def _refuse_other_checkpoints(records_path: Path, done: list[dict[str, Any]], pa
                     f"{path} has digest {digests[path]}; rerun with --restart to discard the records, or choose another output_dir")
 
 
+def _without_unstated_failures(done: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The records less those of failed episodes that name no scoop diagnostics: earlier code wrote
+    none on a failed record, so the setting it failed under is unknown. They are run again (and
+    their rows replaced) instead of being taken as finished under whatever the config sets now."""
+    columns = list(ScoopSettings().record_columns())
+    if not done:
+        return done
+    failed = has_error(pd.Series([r.get("error") for r in done], dtype=object)).to_numpy()
+    return [r for r, f in zip(done, failed) if not (f and not any(_present(r.get(c)) for c in columns))]
+
+
 def _refuse_other_scoop_diagnostics(records_path: Path, done: list[dict[str, Any]], scoop: ScoopSettings) -> None:
     """Records whose scoop ran with another `scoop.action_offset` (or `action_offset_draw`), or another
     `scoop.branch_plan` / `branch_draw`, are not resumed under this one (a run directory holds one of
-    each; records from before the columns ran without any). A failed episode's record without the
-    columns says nothing of them: earlier code wrote none there. InputError naming both."""
+    each; records from before the columns ran without any). InputError naming both."""
     want = scoop.record_columns()
     defaults = ScoopSettings().record_columns()
 
     def recorded(r: dict[str, Any]) -> tuple:
         return tuple(type(want[c])(r[c]) if _present(r.get(c)) else defaults[c] for c in want)
 
-    def unstated(r: dict[str, Any]) -> bool:
-        return _present(r.get("error")) and str(r["error"]) != "" and not any(_present(r.get(c)) for c in want)
-
-    other = sorted({recorded(r) for r in done if not unstated(r)} - {tuple(want.values())})
+    other = sorted({recorded(r) for r in done} - {tuple(want.values())})
     if not other:
         return
     offset, draw, plan, branch = other[0]
@@ -343,7 +350,7 @@ def _evaluate_in(out: Path, config: EvaluationConfig, specs: list[EpisodeSpec], 
                  digests: dict[str, str], progress: bool, restart: bool, executor: Executor | None) -> pd.DataFrame:
     """`evaluate` once it holds the run directory: resume, write what describes the records, run the rest."""
     records_path = out / RECORDS_FILE
-    done = [] if restart else _load_existing(records_path)
+    done = [] if restart else _without_unstated_failures(_load_existing(records_path))
     _refuse_other_protocol(records_path, done)
     _refuse_other_checkpoints(records_path, done, paths, digests)
     _refuse_other_scoop_diagnostics(records_path, done, config.scoop)

@@ -179,14 +179,25 @@ def outcome_spread(frame: pd.DataFrame) -> dict[str, Any]:
             "ceiling_state_only": max_auroc(rate, within) if 0 < rate < 1 else float("nan")}
 
 
+SELECTION_ROWS = ("own", "best", "best_samples", "best_replays")  # `selection`'s rows that no model picks
+
+
+def check_model_names(models: list[str]) -> None:
+    """InputError when a model is named as one of `selection`'s own rows (SELECTION_ROWS)."""
+    taken = sorted(set(models) & set(SELECTION_ROWS))
+    if taken:
+        raise InputError(f"a predictor is named {taken[0]!r}, a row of the selection table; rename it (config `name`)")
+
+
 def samples_and_replays(frame: pd.DataFrame) -> tuple[list[int], list[int]]:
     """The `branch` indices of the policy's samples (runs without a nudge: draw 0 and other draws) and
-    of the replays of its own sample (draw 0, nudged or not), each cut to the first k in the order
-    given, k the smaller count, so that the best of either is a best of k. ([], []) unless the runs
-    hold at least one other draw and one nudged replay (or the frame names no `draw` and `offset_m`)."""
-    if not {"draw", "offset_m"} <= set(frame.columns):
+    of the replays of its own sample (draw 0, nudged or not), each with the own run (draw 0, not
+    nudged) first and then the others in the order given, cut to k, the smaller count: the best of
+    either is a best of k, and both hold the own run. ([], []) unless the runs hold at least one
+    other draw and one nudged replay (or the frame names no `draw`, `offset_m` and `own`)."""
+    if not {"draw", "offset_m", "own"} <= set(frame.columns):
         return [], []
-    runs = frame.drop_duplicates("branch").sort_values("branch")
+    runs = frame.drop_duplicates("branch").sort_values(["own", "branch"], ascending=[False, True], kind="stable")
     samples = runs.loc[runs["offset_m"] == 0, "branch"].tolist()
     replays = runs.loc[runs["draw"] == 0, "branch"].tolist()
     if len(samples) < 2 or len(replays) < 2:
@@ -207,6 +218,7 @@ def selection(frame: pd.DataFrame, models: list[str], n_resamples: int = 1000, s
     first also holds `minus_replays` (and its interval): what choosing among samples removes beyond
     what k tries of one sample do by chance.
     """
+    check_model_names(models)
     states = sorted(frame["state"].unique())
     idx = {s: i for i, s in enumerate(states)}
     frame = frame.sort_values(["state", "branch"], kind="stable")

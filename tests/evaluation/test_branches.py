@@ -102,6 +102,10 @@ def test_the_best_of_k_samples_is_set_against_the_best_of_k_replays_of_the_own_s
     assert table.loc["best_samples", "minus_replays_lo"] <= -1 / 3 <= table.loc["best_samples", "minus_replays_hi"]
     text = branch_markdown(outcome_spread(frame), table.reset_index(), 1, "horizon")
     assert "the best of 2 runs of its own sample" in text and "paired by state: -0.333" in text
+    reordered = frame.assign(branch=frame["branch"].map({0: 2, 1: 0, 2: 3, 3: 1}))  # given as draw1, draw2, draw0, nudge
+    assert samples_and_replays(reordered) == ([2, 0], [2, 3])  # the own run first in both, whatever the order
+    with pytest.raises(InputError, match="'best_samples', a row of the selection table"):
+        selection(frame.assign(p_best_samples=0.5), ["best_samples"], n_resamples=100)
     draws_only = frame[frame["branch"] != 2]  # no replay: no such rows
     assert samples_and_replays(draws_only) == ([], [])
     assert list(selection(draws_only, [], n_resamples=100)["choice"]) == ["own", "best"]

@@ -45,10 +45,10 @@ def test_evaluate_with_episodes_that_raise_keeps_their_records_and_exits_1_in_on
         first = records
 
 
-def test_failed_records_of_earlier_code_without_scoop_columns_are_resumed_under_any_setting(tmp_path, capsys):
+def test_failed_records_of_earlier_code_without_scoop_columns_are_run_again_under_the_configs_setting(tmp_path, capsys):
     """Earlier code wrote no scoop-diagnostic columns on a failed episode's record: such a record says
-    nothing of the run's `scoop.action_offset`, so a nudged run resumes it; a finished record of
-    another setting is still refused."""
+    nothing of the setting it failed under, so the episode runs again under the config's (its row
+    replaced, not doubled); a finished record of another setting is still refused."""
     foods = tmp_path / "boulders.yaml"
     foods.write_text(BOULDERS)
     run = tmp_path / "run"
@@ -63,8 +63,10 @@ def test_failed_records_of_earlier_code_without_scoop_columns_are_resumed_under_
                                                        "scoop_branch_plan", "scoop_branch_draw"])
     old.to_parquet(records_path)
     capsys.readouterr()
-    assert main(["evaluate", str(config), "--serial", "--no-progress"]) == 1  # resumed: the same failure, nothing refused
+    assert main(["evaluate", str(config), "--serial", "--no-progress"]) == 1  # run again: the same failure, nothing refused
     assert "episodes failed" in capsys.readouterr().err
+    again = pd.read_parquet(records_path)
+    assert len(again) == 1 and again.loc[0, "scoop_action_offset_m"] == 0.0005  # now under the config's offset
     old.assign(error="").to_parquet(records_path)  # a finished episode without the columns ran with no offset
     assert main(["evaluate", str(config), "--serial", "--no-progress"]) == 2
     assert "scoop.action_offset" in capsys.readouterr().err
