@@ -30,6 +30,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--branch-draw", type=int, metavar="N", default=None,
                         help="scoop.branch_draw: another sample of the policy at the config's scoop.branch_plan, from "
                              "the same state (docs/evaluation.md, \"Branches from one state\"); give each draw its own --output-dir")
+    parser.add_argument("--action-offset-draw", type=int, metavar="N", default=None,
+                        help="scoop.action_offset_draw: another independent set of the nudge's seeded directions, with a "
+                             "config or --override that sets scoop.action_offset (docs/evaluation.md, \"Outcome sensitivity\")")
     parser.add_argument("--serial", action="store_true", help="run in this process instead of on Ray")
     parser.add_argument("--restart", action="store_true", help="discard the run directory's records and start over")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -82,6 +85,8 @@ def _run(args: argparse.Namespace) -> int:
         overrides["executor"] = {**overrides.get("executor", {}), "backend": "serial"}
     if args.branch_draw is not None:
         overrides["scoop"] = {**overrides.get("scoop", {}), "branch_draw": args.branch_draw}
+    if args.action_offset_draw is not None:
+        overrides["scoop"] = {**overrides.get("scoop", {}), "action_offset_draw": args.action_offset_draw}
     config = load_evaluation_config(args.config, overrides)
     records = evaluate(config, progress=not args.no_progress, restart=args.restart)
     print(summary_table(records))

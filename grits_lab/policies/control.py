@@ -80,6 +80,8 @@ class ScoopSettings:
         require(0.0 <= self.action_offset <= 0.01, "scoop.action_offset", self.action_offset,
                 "in [0, 0.01] metres (a diagnostic nudge, not a motion: 0.0005 is half a millimetre)")
         require(self.action_offset_draw >= 0, "scoop.action_offset_draw", self.action_offset_draw, "non-negative")
+        require(self.action_offset_draw == 0 or self.action_offset > 0, "scoop.action_offset_draw", self.action_offset_draw,
+                "0 unless scoop.action_offset sets a nudge to draw directions for")
         require(self.branch_plan is None or self.branch_plan >= 0, "scoop.branch_plan", self.branch_plan,
                 "a plan index (0 = the scoop's first) or null")
         require(self.branch_draw >= 0, "scoop.branch_draw", self.branch_draw, "non-negative")

@@ -220,9 +220,13 @@ def test_evaluate_branch_draw_sets_the_draw_and_is_refused_without_a_branch_plan
     assert len(err) == 1 and "`scoop.branch_draw` must be 0 unless scoop.branch_plan" in err[0] and not out.exists()
     study = load_evaluation_config("experiments/dp_branches_brim.yaml", {"scoop": {"branch_draw": 3}})
     assert (study.scoop.branch_plan, study.scoop.branch_draw, study.transfer.enabled) == (1, 3, False)
+    # --action-offset-draw N is scoop.action_offset_draw, and needs a nudge to draw directions for
+    assert main(["evaluate", "experiments/dp_branches_brim.yaml", "--action-offset-draw", "3", "--output-dir", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "`scoop.action_offset_draw` must be 0 unless scoop.action_offset" in err[0] and not out.exists()
 
 
-def test_a_nudged_replay_shares_the_state_and_the_sample_and_moves_only_from_the_branch_plan(study, models, tmp_path):
+def test_a_nudged_replay_shares_the_state_and_the_sample_and_moves_only_from_the_branch_plan(study, models, tmp_path, capsys):
     """With a branch plan, `scoop.action_offset` moves the actions from that plan on only: the first
     chunk is draw 0's, the branch chunk is draw 0's sample moved by the offset; the study takes it as
     another run of the same state, and refuses it twice."""
@@ -247,6 +251,10 @@ def test_a_nudged_replay_shares_the_state_and_the_sample_and_moves_only_from_the
     with pytest.raises(InputError, match="listed twice"):
         branch_runs([study["draw0"], tmp_path / "nudged", tmp_path / "nudged"])
     from grits_lab.cli import main
+
+    # `--action-offset-draw 3` on the run's own config: the records' draw 0 is not resumed as draw 3
+    assert main(["evaluate", str(tmp_path / "nudged" / "config.yaml"), "--action-offset-draw", "3", "--serial"]) == 2
+    assert "0.003 m (draw 0), but the config sets 0.003 m (draw 3)" in capsys.readouterr().err
 
     # draws 0 and 1 beside draw 0 and its replay: the best of two samples against the best of two replays
     assert main(["compare-predictors", "--branches", str(study["draw0"]), str(tmp_path / "nudged"), str(study["draw1"]),
