@@ -179,7 +179,7 @@ def outcome_spread(frame: pd.DataFrame) -> dict[str, Any]:
             "ceiling_state_only": max_auroc(rate, within) if 0 < rate < 1 else float("nan")}
 
 
-SELECTION_ROWS = ("own", "best", "best_samples", "best_replays")  # `selection`'s rows that no model picks
+SELECTION_ROWS = ("own", "best", "random", "best_samples", "best_replays")  # `selection`'s rows that no model picks
 
 
 def check_model_names(models: list[str]) -> None:
@@ -209,8 +209,11 @@ def samples_and_replays(frame: pd.DataFrame) -> tuple[list[int], list[int]]:
 def selection(frame: pd.DataFrame, models: list[str], n_resamples: int = 1000, seed: int = 0) -> pd.DataFrame:
     """Spill rate when each model picks, in every state, the draw it scores lowest (ties: the first
     run given), beside the policy's own draw 0 (`own`, the rows whose `own` is true) and the best
-    choice among the draws (`best`: a state spills only when every draw does). Rows: "own", "best", then one per model, with the rate,
-    its 95 % interval and the paired difference to `own` (picked minus own) from resampling states.
+    choice among the draws (`best`: a state spills only when every draw does) and a draw picked at
+    random (`random`: the state's mean label, the expected rate). Rows: "own", "best", "random", then
+    one per model, with the rate, its 95 % interval and the paired difference to `own` (picked minus
+    own) from resampling states; a model's row also holds `minus_random` (picked minus random, with
+    its interval), which does not lean on draw 0 being a typical draw.
 
     When the runs hold both other draws and nudged replays of draw 0 (`samples_and_replays`), two
     rows come after "best": "best_samples", the best of k of the policy's samples, and
@@ -227,7 +230,8 @@ def selection(frame: pd.DataFrame, models: list[str], n_resamples: int = 1000, s
     own = np.full(len(states), np.nan)
     first = frame["own"].to_numpy(dtype=bool)
     own[rows[first]] = y[first]
-    per_state: dict[str, np.ndarray] = {"own": own, "best": np.array([y[rows == i].min() for i in range(len(states))])}
+    per_state: dict[str, np.ndarray] = {"own": own, "best": np.array([y[rows == i].min() for i in range(len(states))]),
+                                        "random": np.array([y[rows == i].mean() for i in range(len(states))])}
     samples, replays = samples_and_replays(frame)
     if samples:
         branch = frame["branch"].to_numpy()
@@ -251,6 +255,11 @@ def selection(frame: pd.DataFrame, models: list[str], n_resamples: int = 1000, s
         if name != "own":
             row.update(minus_own=float((values - per_state["own"]).mean()), minus_own_lo=float(np.percentile(diff, 2.5)),
                        minus_own_hi=float(np.percentile(diff, 97.5)))
+        if name in models:
+            gap = values - per_state["random"]
+            boot_gap = gap[draws].mean(axis=1)
+            row.update(minus_random=float(gap.mean()), minus_random_lo=float(np.percentile(boot_gap, 2.5)),
+                       minus_random_hi=float(np.percentile(boot_gap, 97.5)))
         if name == "best_samples":
             gap = values - per_state["best_replays"]
             boot_gap = gap[draws].mean(axis=1)
@@ -276,7 +285,8 @@ def branch_markdown(spread: dict[str, Any], picked: pd.DataFrame, plan: int, lab
         f"p a state's chance of a spill); the best AUROC of any score of the state alone is {spread['ceiling_state_only']:.3f}.",
         "",
     ]
-    names = {"own": "the policy's own sample (draw 0)", "best": "the best of the draws (a state spills only if every draw does)"}
+    names = {"own": "the policy's own sample (draw 0)", "best": "the best of the draws (a state spills only if every draw does)",
+             "random": "a draw picked at random (the state's mean)"}
     k = picked.set_index("choice")["k"].get("best_samples") if "k" in picked.columns else None
     if k is not None:
         names["best"] = "the best of every run given (samples and replays)"
@@ -285,13 +295,18 @@ def branch_markdown(spread: dict[str, Any], picked: pd.DataFrame, plan: int, lab
     rows = []
     for r in picked.to_dict("records"):
         diff = "reference" if r["choice"] == "own" else f"{r['minus_own']:+.3f} [{r['minus_own_lo']:+.3f}, {r['minus_own_hi']:+.3f}]"
-        rows.append([names.get(r["choice"], f"picked by {r['choice']} (lowest P(spill))"), f"{r['rate']:.3f} [{r['rate_lo']:.3f}, {r['rate_hi']:.3f}]", diff])
-    lines.append(markdown_table(["choice in each state", "spill rate [95 %]", "minus the own sample [95 %]"], rows, right=2))
+        random = (f"{r['minus_random']:+.3f} [{r['minus_random_lo']:+.3f}, {r['minus_random_hi']:+.3f}]"
+                  if pd.notna(r.get("minus_random", float("nan"))) else "")
+        rows.append([names.get(r["choice"], f"picked by {r['choice']} (lowest P(spill))"), f"{r['rate']:.3f} [{r['rate_lo']:.3f}, {r['rate_hi']:.3f}]",
+                     diff, random])
+    lines.append(markdown_table(["choice in each state", "spill rate [95 %]", "minus the own sample [95 %]", "minus a random pick [95 %]"],
+                                rows, right=2))
     if k is not None:
         r = picked.set_index("choice").loc["best_samples"]
         lines += ["", f"Best of {k:.0f} samples minus best of {k:.0f} replays, paired by state: {r['minus_replays']:+.3f} "
                   f"[{r['minus_replays_lo']:+.3f}, {r['minus_replays_hi']:+.3f}]: what choosing among the policy's samples "
                   "removes beyond what as many tries of one sample remove by chance."]
     lines += ["", "Intervals from resampling states. A guide that ranks the draws of a state no better than chance picks "
-              "a draw that spills as often as the policy's own."]
+              "a draw that spills as often as one picked at random; the own sample is one draw, which may spill more or "
+              "less than the state's mean."]
     return "\n".join(lines) + "\n"

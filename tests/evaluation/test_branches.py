@@ -73,7 +73,8 @@ def test_the_spread_counts_disagreeing_states_and_the_within_state_variance():
 
 def test_a_guide_that_ranks_the_draws_picks_the_one_that_does_not_spill():
     """Per state the pick is the draw of lowest P(spill): `right` picks the safe draw of state a,
-    `wrong` the spilling one; in b every draw spills. own = draw 0, best = the safest draw."""
+    `wrong` the spilling one; in b every draw spills. own = draw 0, best = the safest draw, random =
+    the state's mean (a: 1/2, b: 1)."""
     frame = pd.DataFrame({"state": ["a", "a", "b", "b"], "branch": [0, 1, 0, 1], "own": [True, False, True, False], "label": [1, 0, 1, 1],
                           "p_right": [0.9, 0.1, 0.5, 0.4], "p_wrong": [0.1, 0.9, 0.5, 0.4]})
     table = selection(frame, ["right", "wrong"], n_resamples=200).set_index("choice")
@@ -81,6 +82,10 @@ def test_a_guide_that_ranks_the_draws_picks_the_one_that_does_not_spill():
     assert table.loc["right", "rate"] == 0.5 and table.loc["right", "minus_own"] == -0.5
     assert table.loc["wrong", "rate"] == 1.0 and table.loc["wrong", "minus_own"] == 0.0
     assert table.loc["right", "minus_own_lo"] <= -0.5 <= table.loc["right", "minus_own_hi"]
+    assert table.loc["random", "rate"] == 0.75 and list(table.index) == ["own", "best", "random", "right", "wrong"]
+    assert table.loc["right", "minus_random"] == -0.25 and table.loc["wrong", "minus_random"] == 0.25
+    assert table.loc["right", "minus_random_lo"] <= -0.25 <= table.loc["right", "minus_random_hi"]
+    assert pd.isna(table.loc["best", "minus_random"])  # only a model's pick is set against a random one
 
 
 def test_the_best_of_k_samples_is_set_against_the_best_of_k_replays_of_the_own_sample():
@@ -95,7 +100,7 @@ def test_the_best_of_k_samples_is_set_against_the_best_of_k_replays_of_the_own_s
                           "label": [1, 0, 1, 0, 1, 1, 1, 0, 0, 1, 1, 1]})
     assert samples_and_replays(frame) == ([0, 1], [0, 2])
     table = selection(frame, [], n_resamples=200).set_index("choice")
-    assert list(table.index) == ["own", "best", "best_samples", "best_replays"]
+    assert list(table.index) == ["own", "best", "random", "best_samples", "best_replays"]
     assert table.loc["best", "rate"] == 0.0 and table.loc["own", "rate"] == pytest.approx(2 / 3)
     assert table.loc["best_samples", "rate"] == pytest.approx(1 / 3) and table.loc["best_replays", "rate"] == pytest.approx(2 / 3)
     assert table.loc["best_samples", "minus_replays"] == pytest.approx(-1 / 3) and table.loc["best_samples", "k"] == 2
@@ -108,7 +113,7 @@ def test_the_best_of_k_samples_is_set_against_the_best_of_k_replays_of_the_own_s
         selection(frame.assign(p_best_samples=0.5), ["best_samples"], n_resamples=100)
     draws_only = frame[frame["branch"] != 2]  # no replay: no such rows
     assert samples_and_replays(draws_only) == ([], [])
-    assert list(selection(draws_only, [], n_resamples=100)["choice"]) == ["own", "best"]
+    assert list(selection(draws_only, [], n_resamples=100)["choice"]) == ["own", "best", "random"]
 
 
 def test_branch_runs_are_scored_at_their_plan_within_each_state_and_the_cli_writes_the_pick(study, models, tmp_path):
@@ -138,12 +143,12 @@ def test_branch_runs_are_scored_at_their_plan_within_each_state_and_the_cli_writ
     assert "AUROC within state" in markdown and "## The draws of one state (plan 1, chunk label)" in markdown
     assert "picked by tiny (lowest P(spill))" in markdown
     picked = pd.read_csv(written / "branch_selection.csv")
-    assert list(picked["choice"]) == ["own", "best", "tiny"]
+    assert list(picked["choice"]) == ["own", "best", "random", "tiny"]
     own = frame[frame["draw"] == 0].sort_values("state")["label"].mean()
     assert picked.set_index("choice").loc["own", "rate"] == pytest.approx(own)
 
 
-def test_without_a_model_the_spread_reads_the_same_labels_and_the_cli_writes_own_and_best(study, models, tmp_path, capsys):
+def test_without_a_model_the_spread_reads_the_same_labels_and_the_cli_writes_own_best_and_random(study, models, tmp_path, capsys):
     """No CONFIG: the labels come from the rollout chunks alone, equal to those the model path reads,
     and the CLI writes the spread with the own and best rows only."""
     from grits_lab.cli import main
@@ -157,9 +162,10 @@ def test_without_a_model_the_spread_reads_the_same_labels_and_the_cli_writes_own
     written = tmp_path / "comparison_branches_test_plan1_dp_horizon"
     assert "## The draws of one state (plan 1, horizon label)" in (written / "branch_spread.md").read_text()
     picked = pd.read_csv(written / "branch_selection.csv").set_index("choice")
-    assert list(picked.index) == ["own", "best"]
+    assert list(picked.index) == ["own", "best", "random"]
     by_state = alone.groupby("state")["label"]
     assert picked.loc["best", "rate"] == pytest.approx(by_state.min().mean())
+    assert picked.loc["random", "rate"] == pytest.approx(by_state.mean().mean())
     assert picked.loc["own", "rate"] == pytest.approx(alone[alone["own"]].sort_values("state")["label"].mean())
     capsys.readouterr()
     assert main(["compare-predictors", "--eval", str(runs[0])]) == 2
