@@ -22,8 +22,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
     )
     parser.add_argument("config", help="evaluation config, e.g. experiments/evaluate_quick.yaml")
-    parser.add_argument("--override", metavar="YAML", default=None,
-                        help="YAML merged over the config (any of its keys), e.g. a sweep's best.yaml with `guidance: {rho: ..., s: ...}`")
+    parser.add_argument("--override", metavar="YAML", action="append", default=None,
+                        help="YAML merged over the config (any of its keys), e.g. a sweep's best.yaml with `guidance: {rho: ..., s: ...}`; "
+                             "repeat it to merge several, in order, mappings key by key")
     parser.add_argument("--methods", nargs="+", default=None, help="evaluate only these methods (default: the config's)")
     parser.add_argument("--output-dir", metavar="DIR", default=None, help="run directory (overrides the config's output_dir)")
     parser.add_argument("--address", help="Ray cluster address (overrides executor.address and RAY_ADDRESS)")
@@ -64,15 +65,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from grits_lab.config import load_yaml
+    from grits_lab.config import load_yaml, merge_mappings
     from grits_lab.evaluation.evaluation_config import load_evaluation_config
     from grits_lab.evaluation.evaluation_run import evaluate, failed_episodes_line, summary_table
 
-    overrides = dict(load_yaml(args.override)) if args.override else {}
-    if "guidance" in overrides and not isinstance(overrides["guidance"], dict):
-        from grits_lab.errors import ConfigError
+    overrides: dict = {}
+    for path in args.override or []:
+        layer = dict(load_yaml(path))
+        if "guidance" in layer and not isinstance(layer["guidance"], dict):
+            from grits_lab.errors import ConfigError
 
-        raise ConfigError(f"{args.override}: `guidance` must be a mapping like {{rho: 2.5, s: 30}}")
+            raise ConfigError(f"{path}: `guidance` must be a mapping like {{rho: 2.5, s: 30}}")
+        overrides = merge_mappings(overrides, layer)
     # Every key of the file is merged over the config (and validated with it: an unknown key is
     # one error naming it); the command-line flags below win over the file.
     if args.methods:

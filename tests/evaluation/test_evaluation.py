@@ -146,6 +146,16 @@ def test_cli_override_file_sets_any_key_and_an_unknown_key_is_one_error(models, 
     assert main(["evaluate", str(base), "--override", str(override), "--serial", "--no-progress"]) == 0
     records = pd.read_parquet(tmp_path / "run" / "episodes.parquet")
     assert list(records["method"]) == ["rule_based"]
+    # repeated, the files merge in order, mappings key by key: the second keeps the first's scoop keys
+    nudge = tmp_path / "nudge.yaml"
+    nudge.write_text(yaml.safe_dump({"scoop": {"action_offset": 0.001}, "output_dir": str(tmp_path / "nudged")}))
+    again = tmp_path / "again.yaml"
+    again.write_text(yaml.safe_dump({"scoop": {"action_offset_draw": 2}}))
+    assert main(["evaluate", str(base), "--override", str(override), "--override", str(nudge), "--override", str(again),
+                 "--serial", "--no-progress"]) == 0
+    nudged = pd.read_parquet(tmp_path / "nudged" / "episodes.parquet")
+    assert list(nudged["method"]) == ["rule_based"] and list(nudged["scoop_action_offset_m"]) == [0.001]
+    assert list(nudged["scoop_action_offset_draw"]) == [2]
     capsys.readouterr()
     override.write_text("trails: 2\n")
     assert main(["evaluate", str(base), "--override", str(override), "--serial"]) == 2
