@@ -88,9 +88,9 @@ def _branches(args: argparse.Namespace, checkpoints: dict[str, Path], configs: l
     import yaml
 
     name = (yaml.safe_load((runs[0].path / "config.yaml").read_text()) or {}).get("run_id", runs[0].path.name)
-    nudged = "_nudged" if any(r.offset_m for r in runs) else ""  # replays of a sample beside (or instead of) other samples
     root = Path(args.output_dir or (configs[0].output_dir if configs else runs[0].path.parent))
-    out = root / f"comparison_branches_{name}_plan{runs[0].plan}{nudged}_{args.method}_{label}"
+    given = "+".join(r.path.name for r in runs)  # as --eval names its sets: another set of runs, another folder
+    out = root / f"comparison_branches_{name}_plan{runs[0].plan}_{given}_{args.method}_{label}"
     described = f"{args.method}'s chunks at plan {runs[0].plan} of {', '.join(args.branches)}"
     spread = outcome_spread(predictions)
     picked = selection(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed)

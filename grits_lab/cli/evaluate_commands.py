@@ -66,6 +66,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from grits_lab.config import load_yaml, merge_mappings
+    from grits_lab.errors import ConfigError
     from grits_lab.evaluation.evaluation_config import load_evaluation_config
     from grits_lab.evaluation.evaluation_run import evaluate, failed_episodes_line, summary_table
 
@@ -73,8 +74,6 @@ def _run(args: argparse.Namespace) -> int:
     for path in args.override or []:
         layer = dict(load_yaml(path))
         if "guidance" in layer and not isinstance(layer["guidance"], dict):
-            from grits_lab.errors import ConfigError
-
             raise ConfigError(f"{path}: `guidance` must be a mapping like {{rho: 2.5, s: 30}}")
         overrides = merge_mappings(overrides, layer)
     # Every key of the file is merged over the config (and validated with it: an unknown key is
@@ -91,7 +90,12 @@ def _run(args: argparse.Namespace) -> int:
         overrides["scoop"] = {**overrides.get("scoop", {}), "branch_draw": args.branch_draw}
     if args.action_offset_draw is not None:
         overrides["scoop"] = {**overrides.get("scoop", {}), "action_offset_draw": args.action_offset_draw}
-    config = load_evaluation_config(args.config, overrides)
+    try:
+        config = load_evaluation_config(args.config, overrides)
+    except ConfigError as error:
+        if not args.override:
+            raise
+        raise ConfigError(f"{error} (the config merged with --override {', '.join(args.override)})") from error
     records = evaluate(config, progress=not args.no_progress, restart=args.restart)
     print(summary_table(records))
     print(f"records: {config.output_dir}/episodes.parquet ({len(records)} episodes); tables and figures: grits-lab report {config.output_dir}")

@@ -96,9 +96,10 @@ def branch_runs(runs: list[str | Path], method: str = "dp") -> list[BranchRun]:
 def branch_predictions(checkpoints: dict[str, Path], runs: list[str | Path], method: str = "dp", label: str = "horizon") -> pd.DataFrame:
     """Every checkpoint's P(spill) on the chunk each run executed at the branch plan: one row per
     (state, run) with `state` (the episode, the bootstrap unit), `branch` (the run's index in `runs`),
-    `draw`, `offset_m`, `own` (draw 0, not nudged), `food`, `label` and `p_<model>`.
+    `draw`, `offset_m`, `offset_draw`, `own` (draw 0, not nudged), `food`, `label` and `p_<model>`.
 
-    Only states every run holds are kept, and only states whose runs saw the same composite cloud
+    Only states every run holds are kept (those some runs lack are named in
+    `frame.attrs["states_left_out"]`, which `outcome_spread` counts), and only states whose runs saw the same composite cloud
     at the branch plan: a state whose clouds differ was not shared (the runs diverged before the
     plan: other code, other CPU kernels) and is an InputError naming it. With no checkpoints the
     frame holds the labels alone (what `outcome_spread` and the own and best rows of `selection` need).
@@ -117,9 +118,10 @@ def branch_predictions(checkpoints: dict[str, Path], runs: list[str | Path], met
         prefix = f"{b.dataset}/"
         part = frame[frame["episode"].str.startswith(prefix) & (frame["chunk"] == plan)].copy()
         part["state"] = part["episode"].str.slice(len(prefix))
-        part["branch"], part["draw"], part["offset_m"], part["own"] = i, b.draw, b.offset_m, b.own
+        part["branch"], part["draw"], part["offset_m"], part["offset_draw"], part["own"] = i, b.draw, b.offset_m, b.offset_draw, b.own
         parts.append(part)
     shared = set.intersection(*(set(p["state"]) for p in parts))
+    every = set.union(*(set(p["state"]) for p in parts))
     if not shared:
         raise InputError(f"no episode reached plan {plan} in every run of {', '.join(str(b.path) for b in branches)}")
     clouds: dict[str, np.ndarray] = {}
@@ -134,7 +136,9 @@ def branch_predictions(checkpoints: dict[str, Path], runs: list[str | Path], met
     out = pd.concat(parts, ignore_index=True)
     out = out[out["state"].isin(shared)].copy()
     out["episode"] = out["state"]
-    return out.sort_values(["state", "branch"], kind="stable").reset_index(drop=True)
+    out = out.sort_values(["state", "branch"], kind="stable").reset_index(drop=True)
+    out.attrs["states_left_out"] = sorted(every - shared)  # reached the plan in some runs only (a failed episode, an unfinished run)
+    return out
 
 
 def _labels_at(branches: list[BranchRun], plan: int, label: str) -> pd.DataFrame:
@@ -158,7 +162,7 @@ def _labels_at(branches: list[BranchRun], plan: int, label: str) -> pd.DataFrame
 def outcome_spread(frame: pd.DataFrame) -> dict[str, Any]:
     """How the draws of one state disagree, for the `label` column of `branch_predictions`.
 
-    states, draws (per state, the fewest), rate m (over every draw), mixed (states whose draws do not
+    states, left_out (states some runs lack, from `branch_predictions`), draws (per state, the fewest), rate m (over every draw), mixed (states whose draws do not
     all agree), all_spill, within = mean over states of the unbiased s (K - s) / (K (K - 1)) (s of K
     draws spilled), an estimate of E[p (1 - p)] with p a state's chance of a spill, `within_share`:
     the share of the label's variance m (1 - m) that lies within states (law of total variance,
@@ -174,7 +178,8 @@ def outcome_spread(frame: pd.DataFrame) -> dict[str, Any]:
     within = float(np.mean(s * (k - s) / (k * (k - 1)))) if (k > 1).all() else float("nan")
     total = float(np.mean(frame["label"].to_numpy(dtype=np.float64) ** 2)) - rate**2  # m (1 - m) for a 0/1 label
     share = float(np.sum(s * (k - s) / k) / len(frame)) / total if total > 0 else float("nan")
-    return {"states": int(len(s)), "draws": int(k.min()), "rate": rate, "mixed": int(((s > 0) & (s < k)).sum()),
+    return {"states": int(len(s)), "left_out": len(frame.attrs.get("states_left_out", [])), "draws": int(k.min()), "rate": rate,
+            "mixed": int(((s > 0) & (s < k)).sum()),
             "all_spill": int((s == k).sum()), "within": within, "within_share": share,
             "ceiling_state_only": max_auroc(rate, within) if 0 < rate < 1 else float("nan")}
 
@@ -285,6 +290,9 @@ def branch_markdown(spread: dict[str, Any], picked: pd.DataFrame, plan: int, lab
         f"p a state's chance of a spill); the best AUROC of any score of the state alone is {spread['ceiling_state_only']:.3f}.",
         "",
     ]
+    if spread.get("left_out"):
+        lines[-2] += (f" Left out: {spread['left_out']} states that reached the plan in some runs only (an episode that failed "
+                      "before it, or a run not finished).")
     names = {"own": "the policy's own sample (draw 0)", "best": "the best of the draws (a state spills only if every draw does)",
              "random": "a draw picked at random (the state's mean)"}
     k = picked.set_index("choice")["k"].get("best_samples") if "k" in picked.columns else None

@@ -12,7 +12,7 @@ import yaml
 
 from grits_lab.errors import ConfigError, InputError
 from grits_lab.evaluation.evaluation_run import evaluate
-from grits_lab.report.branches import branch_predictions, branch_runs, outcome_spread, selection
+from grits_lab.report.branches import branch_markdown, branch_predictions, branch_runs, outcome_spread, selection
 from tests.evaluation.eval_helpers import eval_config
 
 SCOOP = {"max_steps": 36, "min_steps": 36}
@@ -69,6 +69,11 @@ def test_the_spread_counts_disagreeing_states_and_the_within_state_variance():
     assert (spread["states"], spread["draws"], spread["mixed"], spread["all_spill"]) == (2, 2, 1, 1)
     assert spread["rate"] == pytest.approx(0.75) and spread["within"] == pytest.approx(0.25)
     assert spread["within_share"] == pytest.approx((1 * 1 / 2) / 4 / (0.75 * 0.25))  # sum s (K - s) / K over all draws, over m (1 - m)
+    assert spread["left_out"] == 0
+    frame.attrs["states_left_out"] = ["c"]  # as branch_predictions names a state some runs lack
+    assert outcome_spread(frame)["left_out"] == 1
+    picked = selection(frame.assign(branch=frame["draw"], own=frame["draw"] == 0), [], n_resamples=100)
+    assert "Left out: 1 states that reached the plan in some runs only" in branch_markdown(outcome_spread(frame), picked, 1, "horizon")
 
 
 def test_a_guide_that_ranks_the_draws_picks_the_one_that_does_not_spill():
@@ -93,7 +98,7 @@ def test_the_best_of_k_samples_is_set_against_the_best_of_k_replays_of_the_own_s
     replays): samples {0, 1}, replays {0, 2}; run 3 counts in `best` only. State a: a sample avoids the
     spill and the replay does not (-1); b: only run 3 avoids it (0 for both bests, 0 for `best`);
     c: draw 0 is safe (0). Mean gap -1/3."""
-    from grits_lab.report.branches import branch_markdown, samples_and_replays
+    from grits_lab.report.branches import samples_and_replays
 
     frame = pd.DataFrame({"state": np.repeat(["a", "b", "c"], 4), "branch": [0, 1, 2, 3] * 3, "draw": [0, 1, 0, 2] * 3,
                           "offset_m": [0, 0, 0.0005, 0] * 3, "own": [True, False, False, False] * 3,
@@ -138,7 +143,7 @@ def test_branch_runs_are_scored_at_their_plan_within_each_state_and_the_cli_writ
     (out / "tiny").symlink_to(checkpoint.parent)  # the trained run, where --output-dir looks for it
     assert main(["compare-predictors", str(config), "--branches", *map(str, runs), "--label", "chunk", "--bootstrap", "100",
                  "--output-dir", str(out)]) == 0
-    written = out / "comparison_branches_test_plan1_dp_chunk"  # the runs' run_id
+    written = out / "comparison_branches_test_plan1_draw0+draw1+draw2_dp_chunk"  # the runs' run_id and names
     markdown = (written / "predictor_comparison.md").read_text()
     assert "AUROC within state" in markdown and "## The draws of one state (plan 1, chunk label)" in markdown
     assert "picked by tiny (lowest P(spill))" in markdown
@@ -158,8 +163,9 @@ def test_without_a_model_the_spread_reads_the_same_labels_and_the_cli_writes_own
     scored = branch_predictions({"tiny": Path(models["predictor"])}, runs, label="horizon")
     columns = ["state", "branch", "draw", "own", "food", "label"]
     pd.testing.assert_frame_equal(alone[columns], scored[columns], check_dtype=False)
+    assert alone.attrs["states_left_out"] == [] and set(alone["offset_draw"]) == {0}
     assert main(["compare-predictors", "--branches", *map(str, runs), "--bootstrap", "100", "--output-dir", str(tmp_path)]) == 0
-    written = tmp_path / "comparison_branches_test_plan1_dp_horizon"
+    written = tmp_path / "comparison_branches_test_plan1_draw0+draw1+draw2_dp_horizon"
     assert "## The draws of one state (plan 1, horizon label)" in (written / "branch_spread.md").read_text()
     picked = pd.read_csv(written / "branch_selection.csv").set_index("choice")
     assert list(picked.index) == ["own", "best", "random"]
@@ -265,7 +271,7 @@ def test_a_nudged_replay_shares_the_state_and_the_sample_and_moves_only_from_the
     # draws 0 and 1 beside draw 0 and its replay: the best of two samples against the best of two replays
     assert main(["compare-predictors", "--branches", str(study["draw0"]), str(tmp_path / "nudged"), str(study["draw1"]),
                  "--bootstrap", "100", "--output-dir", str(tmp_path / "spread")]) == 0
-    written = tmp_path / "spread" / "comparison_branches_test_plan1_nudged_dp_horizon"
+    written = tmp_path / "spread" / "comparison_branches_test_plan1_draw0+nudged+draw1_dp_horizon"
     picked = pd.read_csv(written / "branch_selection.csv").set_index("choice")
     labels = branch_predictions({}, [study["draw0"], tmp_path / "nudged", study["draw1"]], label="horizon")
     best = {name: labels[labels["branch"].isin(among)].groupby("state")["label"].min().mean()

@@ -160,7 +160,7 @@ def test_cli_override_file_sets_any_key_and_an_unknown_key_is_one_error(models, 
     override.write_text("trails: 2\n")
     assert main(["evaluate", str(base), "--override", str(override), "--serial"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "trails" in err[0]
+    assert len(err) == 1 and "trails" in err[0] and f"merged with --override {override}" in err[0]  # names the file that set it
 
 
 def test_history_gives_the_commanded_actions_and_the_resting_pose_before_the_first():
