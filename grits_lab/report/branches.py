@@ -252,24 +252,22 @@ def selection(frame: pd.DataFrame, models: list[str], n_resamples: int = 1000, s
         per_state[m] = picked
     rng = np.random.default_rng(seed)
     draws = rng.integers(0, len(states), (n_resamples, len(states)))
+
+    def mean_and_interval(key: str, per_state_values: np.ndarray) -> dict[str, float]:
+        """`key`, `key_lo`, `key_hi`: the mean over states and its 95 % interval over the resampled states."""
+        boot = per_state_values[draws].mean(axis=1)
+        return {key: float(per_state_values.mean()), f"{key}_lo": float(np.percentile(boot, 2.5)),
+                f"{key}_hi": float(np.percentile(boot, 97.5))}
+
     out = []
     for name, values in per_state.items():
-        boot = values[draws].mean(axis=1)
-        diff = (values - per_state["own"])[draws].mean(axis=1)
-        row = {"choice": name, "rate": float(values.mean()), "rate_lo": float(np.percentile(boot, 2.5)), "rate_hi": float(np.percentile(boot, 97.5))}
+        row = {"choice": name, **mean_and_interval("rate", values)}
         if name != "own":
-            row.update(minus_own=float((values - per_state["own"]).mean()), minus_own_lo=float(np.percentile(diff, 2.5)),
-                       minus_own_hi=float(np.percentile(diff, 97.5)))
+            row.update(mean_and_interval("minus_own", values - per_state["own"]))
         if name in models:
-            gap = values - per_state["random"]
-            boot_gap = gap[draws].mean(axis=1)
-            row.update(minus_random=float(gap.mean()), minus_random_lo=float(np.percentile(boot_gap, 2.5)),
-                       minus_random_hi=float(np.percentile(boot_gap, 97.5)))
+            row.update(mean_and_interval("minus_random", values - per_state["random"]))
         if name == "best_samples":
-            gap = values - per_state["best_replays"]
-            boot_gap = gap[draws].mean(axis=1)
-            row.update(k=len(samples), minus_replays=float(gap.mean()), minus_replays_lo=float(np.percentile(boot_gap, 2.5)),
-                       minus_replays_hi=float(np.percentile(boot_gap, 97.5)))
+            row.update(k=len(samples), **mean_and_interval("minus_replays", values - per_state["best_replays"]))
         out.append(row)
     return pd.DataFrame(out)
 
@@ -300,19 +298,23 @@ def branch_markdown(spread: dict[str, Any], picked: pd.DataFrame, plan: int, lab
         names["best"] = "the best of every run given (samples and replays)"
         names["best_samples"] = f"the best of {k:.0f} of the policy's samples (draw 0 and other draws)"
         names["best_replays"] = f"the best of {k:.0f} runs of its own sample (draw 0 and nudged replays): chance alone"
+    def interval(r: dict[str, Any], key: str, sign: str = "+") -> str:
+        """`key` of row `r` with its interval, "" where the row has none."""
+        if pd.isna(r.get(key, float("nan"))):
+            return ""
+        return f"{r[key]:{sign}.3f} [{r[f'{key}_lo']:{sign}.3f}, {r[f'{key}_hi']:{sign}.3f}]"
+
     rows = []
     for r in picked.to_dict("records"):
-        diff = "reference" if r["choice"] == "own" else f"{r['minus_own']:+.3f} [{r['minus_own_lo']:+.3f}, {r['minus_own_hi']:+.3f}]"
-        random = (f"{r['minus_random']:+.3f} [{r['minus_random_lo']:+.3f}, {r['minus_random_hi']:+.3f}]"
-                  if pd.notna(r.get("minus_random", float("nan"))) else "")
-        rows.append([names.get(r["choice"], f"picked by {r['choice']} (lowest P(spill))"), f"{r['rate']:.3f} [{r['rate_lo']:.3f}, {r['rate_hi']:.3f}]",
-                     diff, random])
+        diff = "reference" if r["choice"] == "own" else interval(r, "minus_own")
+        rows.append([names.get(r["choice"], f"picked by {r['choice']} (lowest P(spill))"), interval(r, "rate", sign=""), diff,
+                     interval(r, "minus_random")])
     lines.append(markdown_table(["choice in each state", "spill rate [95 %]", "minus the own sample [95 %]", "minus a random pick [95 %]"],
                                 rows, right=2))
     if k is not None:
-        r = picked.set_index("choice").loc["best_samples"]
-        lines += ["", f"Best of {k:.0f} samples minus best of {k:.0f} replays, paired by state: {r['minus_replays']:+.3f} "
-                  f"[{r['minus_replays_lo']:+.3f}, {r['minus_replays_hi']:+.3f}]: what choosing among the policy's samples "
+        r = picked.set_index("choice").loc["best_samples"].to_dict()
+        lines += ["", f"Best of {k:.0f} samples minus best of {k:.0f} replays, paired by state: {interval(r, 'minus_replays')}: "
+                  "what choosing among the policy's samples "
                   "removes beyond what as many tries of one sample remove by chance."]
     lines += ["", "Intervals from resampling states. A guide that ranks the draws of a state no better than chance picks "
               "a draw that spills as often as one picked at random; the own sample is one draw, which may spill more or "
