@@ -12,7 +12,9 @@ the paired comparison `grits-lab compare-runs` writes there; `paired` every meth
 Policy on the same episodes; `per_food` each method's spills and successes food by food (the page's
 episodes.csv); `sweep_reference` a sweep's front against its reference methods and
 `sweep_trials` every one of its trials (a sweep's summary: `grits-lab report results/sweeps/NAME
---summary-to ...`); `shift BEFORE..AFTER[+AFTER...]`
+--summary-to ...`); `answer NAME+NAME...` the three sentences a results page opens with (does
+GRITS spill less than Diffusion Policy during the scoop, by how much, on how many chains and
+seeds), each NAME one chain of checkpoints; `shift BEFORE..AFTER[+AFTER...]`
 sets each method's outcomes in one summary beside another's (a protocol before and after a change,
 whose records need not exist any more); `index` lists every experiment folder. `grits-lab results
 check` (and tests/report/test_results_pages.py) fails when a page differs from what its summaries
@@ -399,6 +401,48 @@ def index_block(root: Path, name: str | None, here: Path) -> str:
     return markdown_table(["Experiment", "Question", "Protocol", "Episodes"], rows, right=99)
 
 
+ANSWER_METHOD, ANSWER_REFERENCE, SIGNIFICANCE = "grits", "dp", 0.05
+
+
+def answer_block(root: Path, name: str, here: Path) -> str:
+    """`NAME+NAME...`, each experiment one chain (a policy and predictor trained from nothing): three
+    sentences from their paired.csv, summary.csv and provenance.json. Whether GRITS (the paper's
+    method, `grits`) spills during the scoop less than Diffusion Policy on the same seeds, by the
+    exact sign test at p < SIGNIFICANCE on each chain; by how much, each rate with its Wilson 95 %
+    interval; on how many chains (DP's policy checkpoints) and paired seeds. InputError when an
+    experiment holds no `grits` against `dp` pairing."""
+    rows = []
+    for experiment in name.split("+"):
+        paired = pd.read_csv(_folder(root, experiment, needs=PAIRED_METHODS_FILE) / PAIRED_METHODS_FILE)
+        pair = paired[(paired["reference"] == ANSWER_REFERENCE) & (paired["method"] == ANSWER_METHOD)]
+        if pair.empty:
+            raise InputError(f"{EXPERIMENTS_DIR / experiment / PAIRED_METHODS_FILE}: no `{ANSWER_METHOD}` paired with "
+                             f"`{ANSWER_REFERENCE}`, which the answer block reads")
+        summary, provenance = _summary(root, experiment), _provenance(root, experiment)
+        reference = provenance["methods"][ANSWER_REFERENCE]
+        rows.append({"experiment": experiment, "pair": pair.iloc[0],
+                     "grits": _lookup(summary, ANSWER_METHOD, "spillage"), "dp": _lookup(summary, ANSWER_REFERENCE, "spillage"),
+                     "policy": ", ".join(reference.get("checkpoint digests (sha256, first 16)", {}).get("policy", [])) or "not recorded",
+                     "levels": tuple(reference["levels"]), "foods": int(reference["foods"])})
+    fewer = [r for r in rows if r["pair"]["spillage_after"] < r["pair"]["spillage_before"] and r["pair"]["spillage_p"] < SIGNIFICANCE]
+    more = [r for r in rows if r["pair"]["spillage_after"] > r["pair"]["spillage_before"] and r["pair"]["spillage_p"] < SIGNIFICANCE]
+    verdict = ("Yes" if len(fewer) == len(rows) else "Not measurably" if not fewer else f"On {len(fewer)} of {len(rows)} chains")
+    levels = sorted({level for r in rows for level in r["levels"]})
+    does = (f"Does GRITS spill less than Diffusion Policy during the scoop in this simulation, at the levels "
+            f"{', '.join(levels)}? {verdict}: the exact sign test on the same seeds gives p < {SIGNIFICANCE} for fewer "
+            f"spills on {len(fewer)} of {len(rows)} chains" + (f", and for more on {len(more)}" if more else "") + ".")
+    how_much = "By how much: GRITS against DP spills during the scoop in " + "; ".join(
+        f"{_cell(r['grits'])} against {_cell(r['dp'])} on [{r['experiment']}]({_link(root, r['experiment'], PAGE_FILE, here)}) "
+        f"(paired {int(r['pair']['spillage_after'])} against {int(r['pair']['spillage_before'])}, p {float(r['pair']['spillage_p']):.2g})"
+        for r in rows) + "."
+    policies = ", ".join(f"`{r['policy']}`" for r in rows)
+    seeds = [int(r["pair"]["paired"]) for r in rows]
+    on_what = (f"On {len(rows)} chain{'' if len(rows) == 1 else 's'}, each a policy and predictor trained from nothing "
+               f"(DP's policy checkpoints {policies}), and {sum(seeds)} paired seeds ({', '.join(map(str, seeds))}) of "
+               f"{max(r['foods'] for r in rows)} unseen foods; rates are k/n with Wilson 95 % intervals.")
+    return f"{does} {how_much} {on_what}"
+
+
 BLOCKS: dict[str, Callable[[Path, str, Path], str]] = {
     "outcomes": outcomes_block,
     "stages": stages_block,
@@ -412,6 +456,7 @@ BLOCKS: dict[str, Callable[[Path, str, Path], str]] = {
     "sweep_reference": sweep_reference_block,
     "sweep_trials": partial(sweep_reference_block, every_trial=True),
     "index": index_block,
+    "answer": answer_block,
 }
 
 

@@ -249,3 +249,32 @@ def test_the_summary_reads_the_code_commit_before_it_writes_into_the_page(tmp_pa
     summary.write_summary(load_run(run), page, "grits-lab report run --summary-to docs/experiments/commit")
     assert seen == [[]]
     assert json.loads((page / "provenance.json").read_text())["summary code commit"] == "abc123"
+
+
+def _chain(docs: Path, name: str, policy: str, dp_spills: int, grits_spills: int, only_dp: int, only_grits: int, p: float):
+    """An experiment folder of one chain: DP and GRITS on 20 paired seeds, their spills and the sign test."""
+    folder = docs / name
+    folder.mkdir(parents=True)
+    pd.DataFrame([{"reference": "dp", "method": "grits", "paired": 20, "spillage_before": dp_spills, "spillage_after": grits_spills,
+                   "spillage_only_before": only_dp, "spillage_only_after": only_grits, "spillage_p": p}]).to_csv(folder / "paired.csv", index=False)
+    pd.DataFrame([{"method": m, "method_name": m, "outcome": "spillage", "k": k, "n": 20, "rate": k / 20, "ci_low": 0.01, "ci_high": 0.5}
+                  for m, k in (("dp", dp_spills), ("grits", grits_spills))]).to_csv(folder / "summary.csv", index=False)
+    (folder / "provenance.json").write_text(json.dumps({"methods": {"dp": {"name": "Diffusion Policy", "levels": ["high", "low"], "foods": 2,
+                                                                           "checkpoint digests (sha256, first 16)": {"policy": [policy]}}}}))
+
+
+def test_the_answer_block_says_whether_grits_spills_less_by_how_much_and_on_how_many_chains_and_seeds(tmp_path):
+    docs = tmp_path / "docs" / "experiments"
+    _chain(docs, "one", "aaaa", dp_spills=9, grits_spills=1, only_dp=8, only_grits=0, p=0.0078)
+    _chain(docs, "two", "bbbb", dp_spills=5, grits_spills=4, only_dp=3, only_grits=2, p=1.0)
+    page = tmp_path / "docs" / "results.md"
+    page.write_text("<!-- generated: answer one+two -->\n<!-- end generated -->\n")
+    text = render_all(tmp_path)[page]
+    assert "at the levels high, low? On 1 of 2 chains: the exact sign test on the same seeds gives p < 0.05 for fewer spills on 1 of 2 chains." in text
+    assert "5.0% [1.0%, 50.0%] (1/20) against 45.0% [1.0%, 50.0%] (9/20) on [one](experiments/one/README.md) (paired 1 against 9, p 0.0078)" in text
+    assert "On 2 chains" in text and "`aaaa`, `bbbb`" in text and "40 paired seeds (20, 20) of 2 unseen foods" in text
+    page.write_text("<!-- generated: answer two -->\n<!-- end generated -->\n")
+    assert "Not measurably" in render_all(tmp_path)[page]
+    (docs / "two" / "paired.csv").write_text("reference,method,paired,spillage_before,spillage_after,spillage_p\ndp,dp_post,20,5,1,0.2\n")
+    with pytest.raises(InputError, match=r"two/paired.csv: no `grits` paired with `dp`"):
+        render_all(tmp_path)
