@@ -4,6 +4,7 @@ README, docs/results.md and the experiment pages are rendered from the committed
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pandas as pd
@@ -249,3 +250,21 @@ def test_the_summary_reads_the_code_commit_before_it_writes_into_the_page(tmp_pa
     summary.write_summary(load_run(run), page, "grits-lab report run --summary-to docs/experiments/commit")
     assert seen == [[]]
     assert json.loads((page / "provenance.json").read_text())["summary code commit"] == "abc123"
+
+
+@pytest.mark.parametrize("page_text, fault", [
+    ("<!-- generated: index -->\nold\n\nhand-written paragraph\n<!-- generated: index -->\nold\n<!-- end generated -->\n",
+     r"README.md:1: `<!-- generated: index -->` has no `<!-- end generated -->` before the next block \(line 5\)"),
+    ("<!-- generated: index -->\nold\n", r"README.md:1: `<!-- generated: index -->` has no `<!-- end generated -->`"),
+    ("hand-written\n<!-- end generated -->\n", r"README.md:2: `<!-- end generated -->` closes no block"),
+    ("<!-- generated:index -->\nold\n<!-- end generated -->\n", r"README.md:1: a block marker that does not parse"),
+])
+def test_a_page_whose_markers_do_not_pair_is_refused_by_render_and_check_and_nothing_is_written(tmp_path, capsys, page_text, fault):
+    page = tmp_path / "README.md"
+    page.write_text(page_text)
+    for action in ("check", "render"):
+        assert main(["results", action, "--root", str(tmp_path)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and str(page) in err[0], err
+        assert re.search(fault, err[0]), err
+    assert page.read_text() == page_text
