@@ -57,7 +57,7 @@ class TorchPolicyController:
         torch.manual_seed(seed)
         self.policy = mlp_policy(hidden, n_action_steps)
         if weights is not None:
-            self.policy.load_state_dict(torch.load(weights, map_location="cpu"))
+            self.policy.load_state_dict(torch.load(weights, map_location="cpu", weights_only=True))
         self.policy.eval()
         self.n_action_steps = n_action_steps
         self.max_plans = max_plans

@@ -79,6 +79,29 @@ def test_a_key_given_twice_is_refused_naming_the_key_and_both_lines(tmp_path, te
     assert str(info.value) == f"{path}: key `{key}` is given twice (lines {lines[0]} and {lines[1]}); give it once"
 
 
+@pytest.mark.parametrize("text, key, line, value", [
+    ("foods:\n  on: {}\n  yes: {}\n", "foods.on", 2, "True"),  # YAML 1.1 reads both as the boolean True
+    ("levels:\n  low: 1\n  off: 2\n", "levels.off", 3, "False"),
+    ("foods:\n  ~: {}\n", "foods.~", 2, "None"),
+])
+def test_a_key_that_yaml_reads_as_a_boolean_or_null_is_refused_naming_it_and_how_to_quote_it(tmp_path, text, key, line, value):
+    path = tmp_path / "foods.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_yaml(path)
+    assert str(info.value) == (f"{path}: key `{key}` (line {line}) is read by YAML as {value}, not as a name; "
+                               f"quote it: \"{key.rsplit('.', 1)[-1]}\"")
+
+
+def test_two_spellings_of_one_number_are_one_key_given_twice(tmp_path):
+    path = tmp_path / "counts.yaml"
+    path.write_text("counts:\n  10: a\n  0xa: b\n")
+    with pytest.raises(ConfigError, match=r"key `counts.0xa` is given twice \(lines 2 and 3\)"):
+        load_yaml(path)
+    path.write_text('foods:\n  "on": {}\n  "yes": {}\n')
+    assert load_yaml(path) == {"foods": {"on": {}, "yes": {}}}
+
+
 def test_merge_keys_may_be_overridden_and_equal_text_of_other_types_are_two_keys(tmp_path):
     path = tmp_path / "ok.yaml"
     path.write_text("base: &b {count: 1}\ninner:\n  <<: *b\n  count: 2\n1: a\n'1': b\n")

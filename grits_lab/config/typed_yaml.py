@@ -59,32 +59,42 @@ def parse_yaml(text: str, source: str | Path) -> Any:
         node = loader.get_single_node()
         if node is None:
             return None
-        _refuse_repeated_keys(node, "", str(source), set())
+        _refuse_repeated_keys(node, "", str(source), set(), loader)
         return loader.construct_document(node)
     finally:
         loader.dispose()
 
 
-def _refuse_repeated_keys(node: yaml.Node, prefix: str, source: str, visited: set[int]) -> None:
+_NOT_NAMES = ("tag:yaml.org,2002:bool", "tag:yaml.org,2002:null")  # plain `on`, `yes`, `off`, `~`, ...
+
+
+def _refuse_repeated_keys(node: yaml.Node, prefix: str, source: str, visited: set[int], loader: yaml.SafeLoader) -> None:
+    """ConfigError for a key given twice in one mapping, compared as the value YAML reads (`10` and
+    `0xa` are one key), and for a plain key that YAML 1.1 reads as a boolean or null (`on`, `yes`,
+    `off`, `~`): two foods `on` and `yes` would otherwise become one key True."""
     if id(node) in visited:  # an alias: already checked where its anchor stands
         return
     visited.add(id(node))
     if isinstance(node, yaml.SequenceNode):
         for i, item in enumerate(node.value):
-            _refuse_repeated_keys(item, f"{prefix}[{i}]", source, visited)
+            _refuse_repeated_keys(item, f"{prefix}[{i}]", source, visited, loader)
     elif isinstance(node, yaml.MappingNode):
         lines: dict[tuple[str, Any], int] = {}
         for key_node, value_node in node.value:
             if key_node.tag == "tag:yaml.org,2002:merge":  # `<<: *base`: its keys may be overridden here
-                _refuse_repeated_keys(value_node, prefix, source, visited)
+                _refuse_repeated_keys(value_node, prefix, source, visited, loader)
                 continue
             name = key_node.value if isinstance(key_node, yaml.ScalarNode) else repr(key_node.value)
             key = f"{prefix}.{name}" if prefix else str(name)
             line = key_node.start_mark.line + 1
-            if (key_node.tag, name) in lines:
-                raise ConfigError(f"{source}: key `{key}` is given twice (lines {lines[key_node.tag, name]} and {line}); give it once")
-            lines[key_node.tag, name] = line
-            _refuse_repeated_keys(value_node, key, source, visited)
+            if isinstance(key_node, yaml.ScalarNode) and key_node.tag in _NOT_NAMES and not key_node.style:
+                raise ConfigError(f"{source}: key `{key}` (line {line}) is read by YAML as "
+                                  f"{loader.construct_object(key_node)}, not as a name; quote it: \"{name}\"")
+            read = loader.construct_object(key_node) if isinstance(key_node, yaml.ScalarNode) else name
+            if (key_node.tag, read) in lines:
+                raise ConfigError(f"{source}: key `{key}` is given twice (lines {lines[key_node.tag, read]} and {line}); give it once")
+            lines[key_node.tag, read] = line
+            _refuse_repeated_keys(value_node, key, source, visited, loader)
 
 
 def load_config(path: str | Path, cls: type[T]) -> T:

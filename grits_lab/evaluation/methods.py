@@ -93,15 +93,23 @@ def weights_digest(path: str | Path) -> str | None:
 
 
 def checkpoint_identity(path: str | Path) -> dict[str, str | None]:
-    """What a file digest cannot tell, from one load of the checkpoint: `weights_sha256_16`
+    """What a file digest cannot tell, from one read of the checkpoint's bytes: `weights_sha256_16`
     (`weights_digest`) and `trained on cpu kernels` (its `cpu_kernels`, grits_lab/versions.py; None
-    when written before it was recorded). Both None for a directory."""
+    when written before it was recorded). Both None for a directory. The bytes are parsed by the
+    tensors-only loader every method uses (grits_lab/training/checkpoints.py): a file holding any
+    other object is refused with InputError and nothing in it runs."""
     import torch
+
+    from grits_lab.training.checkpoints import load_checkpoint
 
     path = Path(path)
     if path.is_dir():
         return {"weights_sha256_16": None, "trained on cpu kernels": None}
-    checkpoint = torch.load(path, map_location="cpu", weights_only=False)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise StorageError(f"cannot read checkpoint {path}: {exc.strerror or exc}") from None
+    checkpoint = load_checkpoint(path, data=data)
     digest = hashlib.sha256()
 
     def visit(value: Any, where: str) -> None:
@@ -119,7 +127,7 @@ def checkpoint_identity(path: str | Path) -> dict[str, str | None]:
                 visit(item, f"{where}[{i}]")
 
     visit(checkpoint, "")
-    kernels = checkpoint.get(CPU_KERNELS)
+    kernels = checkpoint.get(CPU_KERNELS) if isinstance(checkpoint, dict) else None
     return {"weights_sha256_16": digest.hexdigest()[:16], "trained on cpu kernels": str(kernels) if kernels else None}
 
 
@@ -221,8 +229,11 @@ def check_method_checkpoints(name: str, paths: dict[str, str]) -> None:
 
     n_action_steps = None
     for key, path in paths.items():
-        if key == "demos":
-            continue  # a dataset directory, read by its own loader
+        if key == "demos":  # a dataset directory, read by its own loader (arrays only, never a pickle)
+            if not Path(path).is_dir():
+                raise ConfigError(f"`checkpoints.demos` must be a demonstrations dataset directory (`grits-lab collect`), "
+                                  f"not a file: {path}")
+            continue
         ckpt = load_checkpoint(path)
         state = ckpt.get("policy") if isinstance(ckpt, dict) else None
         if key == "policy" or key == "bc":

@@ -21,11 +21,17 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Collection, Sequence
 
 import pandas as pd
 
 from grits_lab.errors import InputError
 from grits_lab.records import OUTCOME_COLUMNS
+
+
+def canonical_name(name: object) -> str:
+    """`Red Bean`, `red-bean` and `red_bean` name the same food; records may use any of them."""
+    return str(name).strip().lower().replace(" ", "_").replace("-", "_")
 
 REAL_COLUMNS = ("method", "food", "level", "trial", *OUTCOME_COLUMNS)
 OPTIONAL_COLUMNS = ("trials", "source")
@@ -33,8 +39,15 @@ PAPER_FILE = Path(__file__).with_name("paper_real_robot.csv")
 PAPER_SOURCE = "paper"
 
 
-def read_real_trials(path: str | Path) -> pd.DataFrame:
-    """The trials of `path` as rows of (source, method, trials, <outcome>_k); InputError, one line, on a bad file."""
+ALL = "all"  # food or level of an aggregate row over every food or level
+
+
+def read_real_trials(path: str | Path, methods: Collection[str] | None = None) -> pd.DataFrame:
+    """The trials of `path` as rows of (source, method, food, level, trials, <outcome>_k); InputError,
+    one line naming the file (and line), on a bad file: a missing or unknown column, a method not in
+    `methods` (when given), a row of one trial without its `trial` index or listed twice, outcomes
+    no trial can have together (task success with spillage or scoop failure), or a lab's file whose
+    source would be `paper` (the shipped paper numbers' name)."""
     path = Path(path)
     try:
         raw = pd.read_csv(path, dtype=str, keep_default_na=False)
@@ -46,18 +59,57 @@ def read_real_trials(path: str | Path) -> pd.DataFrame:
     unknown = [c for c in raw.columns if c not in REAL_COLUMNS + OPTIONAL_COLUMNS]
     if unknown:
         raise InputError(f"{path}: unknown column `{unknown[0]}`; the columns are {', '.join(REAL_COLUMNS + OPTIONAL_COLUMNS)}")
-    rows = []
+    rows, seen = [], {}
     for line, row in enumerate(raw.to_dict("records"), start=2):
         where = f"{path}:{line}"
         method = row["method"].strip()
         if not method:
             raise InputError(f"{where}: `method` is empty")
+        if methods is not None and method not in methods:
+            raise InputError(f"{where}: unknown method `{method}`; one of {', '.join(sorted(methods))}")
+        source = row.get("source", "").strip() or path.stem
+        if source == PAPER_SOURCE and path.resolve() != PAPER_FILE.resolve():
+            raise InputError(f"{path}: the source `{PAPER_SOURCE}` is the name of the paper's shipped numbers; add a "
+                             "`source` column naming who ran the trials (e.g. `our lab`), or rename the file")
+        food, level = canonical_name(row["food"]) or ALL, row["level"].strip().lower() or ALL
         trials = _count(row.get("trials", ""), where, "trials", 1) or 1
-        out = {"source": row.get("source", "").strip() or path.stem, "method": method, "trials": trials}
+        out = {"source": source, "method": method, "food": food, "level": level, "trials": trials}
+        if trials == 1:
+            trial = _count(row["trial"], where, "trial", 0)
+            if trial is None:
+                raise InputError(f"{where}: `trial` is empty on a row of one trial; number the trials of each "
+                                 "(method, food, level), or give `trials` for an aggregate row")
+            key = (source, method, food, level, trial)
+            if key in seen:
+                raise InputError(f"{where}: trial {trial} of {method} on {food} {level} is listed already on line {seen[key]}")
+            seen[key] = line
         for outcome in OUTCOME_COLUMNS:
             out[f"{outcome}_k"] = _outcome(row[outcome], where, outcome, trials)
+        for other in ("spillage", "scoop_failure"):
+            success, failed = out["task_success_k"], out[f"{other}_k"]
+            if success + failed > trials:  # NaN (not stated) compares False
+                raise InputError(f"{where}: a trial with `task_success` cannot have `{other}`" if trials == 1 else
+                                 f"{where}: `task_success` {success:.0f} and `{other}` {failed:.0f} add up to more than "
+                                 f"{trials} trials; a successful trial has neither spillage nor a scoop failure")
         rows.append(out)
-    return pd.DataFrame(rows, columns=["source", "method", "trials", *(f"{o}_k" for o in OUTCOME_COLUMNS)])
+    return pd.DataFrame(rows, columns=["source", "method", "food", "level", "trials", *(f"{o}_k" for o in OUTCOME_COLUMNS)])
+
+
+def read_real_files(paths: Sequence[str | Path], methods: Collection[str] | None = None) -> list[pd.DataFrame]:
+    """`read_real_trials` of each file, each counted once: InputError for a file given twice, or two
+    files holding trials of one source (name it with a `source` column)."""
+    frames, sources = [], {}
+    for i, path in enumerate(map(Path, paths)):
+        if any(path.resolve() == Path(p).resolve() for p in paths[:i]):
+            raise InputError(f"{path}: the real-robot trials file is given twice; give each file once")
+        frame = read_real_trials(path, methods)
+        for source in frame["source"].unique():
+            if source in sources:
+                raise InputError(f"{sources[source]} and {path} both hold trials of the source `{source}`; give each "
+                                 "lab's file a `source` column of its own")
+            sources[source] = path
+        frames.append(frame)
+    return frames
 
 
 def _count(text: str, where: str, column: str, least: int) -> int | None:
@@ -89,10 +141,11 @@ def _outcome(text: str, where: str, column: str, trials: int) -> float:
 
 
 def real_counts(trials: pd.DataFrame) -> pd.DataFrame:
-    """Per (source, method): n and k of each outcome over the trials that state it."""
+    """Per (source, method): n and k of each outcome over the trials that state it, and `pairs`: the
+    (food, level) pairs of its trials (`all` for an aggregate over foods or levels)."""
     rows = []
     for (source, method), group in trials.groupby(["source", "method"], sort=False):
-        row = {"source": source, "method": method}
+        row = {"source": source, "method": method, "pairs": tuple(sorted(set(zip(group["food"], group["level"]))))}
         for outcome in OUTCOME_COLUMNS:
             stated = group[group[f"{outcome}_k"].notna()]
             row[f"{outcome}_k"] = int(stated[f"{outcome}_k"].sum())

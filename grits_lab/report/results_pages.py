@@ -47,6 +47,9 @@ from grits_lab.sim.spill_metrics import SPILL_CAUSES, SPILL_STAGES
 
 EXPERIMENTS_DIR = Path("docs") / "experiments"
 PAGE_FILE = "README.md"
+OPEN_MARKER, END_MARKER = "<!-- generated: KIND [NAME] -->", "<!-- end generated -->"
+_MARKER_LINE = re.compile(r"^\s*<!--\s*(end\s+)?generated\b.*$", re.M)  # anything that looks like a marker
+_OPEN_LINE = re.compile(r"<!-- generated: [a-z_]+(?: [A-Za-z0-9_.+-]+)? -->")
 BLOCK = re.compile(r"(<!-- generated: (?P<kind>[a-z_]+)(?: (?P<name>[A-Za-z0-9_.+-]+))? -->\n)(?P<body>.*?)(<!-- end generated -->)", re.S)
 OUTCOME_HEADERS = {
     "task_success": "Task success",
@@ -76,8 +79,10 @@ def pages(root: str | Path) -> list[Path]:
 
 
 def render_page(text: str, page: Path, root: str | Path) -> str:
-    """`text` (the page at `page`) with every generated block rendered afresh; the rest unchanged."""
+    """`text` (the page at `page`) with every generated block rendered afresh; the rest unchanged.
+    InputError naming the page and line when its markers do not pair (check_markers)."""
     root = Path(root)
+    check_markers(text, page)
 
     def block(match: re.Match[str]) -> str:
         kind, name = match["kind"], match["name"]
@@ -94,11 +99,36 @@ def render_page(text: str, page: Path, root: str | Path) -> str:
     return BLOCK.sub(block, text)
 
 
+def check_markers(text: str, page: Path) -> None:
+    """Every block marker of `text` parses and they pair in order, open then end: a block left
+    open would otherwise reach the next block's end and take the hand-written text between them.
+    InputError `PAGE:LINE: ...` saying which marker to add or fix; nothing is rendered then."""
+    opened: tuple[int, str] | None = None
+    for match in _MARKER_LINE.finditer(text):
+        line, marker = text.count("\n", 0, match.start()) + 1, match.group(0).strip()
+        if marker == END_MARKER:
+            if opened is None:
+                raise InputError(f"{page}:{line}: `{END_MARKER}` closes no block; remove it or add its "
+                                 f"`{OPEN_MARKER}` above the generated text")
+            opened = None
+        elif _OPEN_LINE.fullmatch(marker):
+            if opened is not None:
+                raise InputError(f"{page}:{opened[0]}: `{opened[1]}` has no `{END_MARKER}` before the next block "
+                                 f"(line {line}); add it where the generated text ends")
+            opened = (line, marker)
+        else:
+            raise InputError(f"{page}:{line}: a block marker that does not parse: `{marker}`; write `{OPEN_MARKER}` "
+                             f"or `{END_MARKER}` on a line of its own")
+    if opened is not None:
+        raise InputError(f"{page}:{opened[0]}: `{opened[1]}` has no `{END_MARKER}`; add it where the generated text ends")
+
+
 def render_all(root: str | Path) -> dict[Path, str]:
     """Every page with generated blocks -> its rendered text."""
     rendered = {}
     for page in pages(root):
         text = page.read_text()
+        check_markers(text, page)
         if BLOCK.search(text):
             rendered[page] = render_page(text, page, root)
     return rendered

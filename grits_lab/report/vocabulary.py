@@ -7,7 +7,7 @@ real-robot numbers of the paper) is defined once here so that every table and fi
 from __future__ import annotations
 
 from grits_lab.records import UNSEEN_FOODS
-from grits_lab.report.real_trials import paper_rates
+from grits_lab.report.real_trials import canonical_name, paper_rates  # noqa: F401 (canonical_name: re-exported)
 
 METHOD_NAMES: dict[str, str] = {
     "expert": "Scripted expert (oracle)",
@@ -64,9 +64,6 @@ PAPER_LABEL = "real robot (paper)"
 MISSING = "—"
 
 
-def canonical_name(name: object) -> str:
-    """`Red Bean`, `red-bean` and `red_bean` name the same food; records may use any of them."""
-    return str(name).strip().lower().replace(" ", "_").replace("-", "_")
 
 
 def method_display(method: str) -> str:

@@ -21,17 +21,18 @@ def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
     return Path(path)
 
 
-def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu", data: bytes | None = None) -> dict[str, Any]:
     """Load a checkpoint written by `save_checkpoint`; missing or damaged files raise StorageError.
 
     Loads with `weights_only=True`: a file holding any object other than tensors and plain data (a
     pickle whose `__reduce__` would run code) is refused with InputError before anything in it runs.
+    data: the file's bytes, read once by the caller (who hashes the same bytes); `path` then only names it.
     """
     path = Path(path)
-    if not path.is_file():
+    if data is None and not path.is_file():
         raise StorageError(f"checkpoint not found: {path}")
     try:
-        return torch.load(path, map_location=map_location, weights_only=True)
+        return torch.load(path if data is None else io.BytesIO(data), map_location=map_location, weights_only=True)
     except pickle.UnpicklingError as exc:
         raise InputError(f"refused checkpoint {path}: {_refusal_reason(exc)}; checkpoints may hold only tensors and plain data") from None
     except (RuntimeError, EOFError, OSError, ValueError) as exc:

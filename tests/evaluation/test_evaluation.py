@@ -267,7 +267,7 @@ def test_the_weights_digest_names_the_model_whatever_path_the_checkpoint_stores(
 
     from grits_lab.evaluation.methods import file_digest, weights_digest
 
-    checkpoint = torch.load(models["policy"], map_location="cpu", weights_only=False)
+    checkpoint = torch.load(models["policy"], map_location="cpu", weights_only=True)
     trained_on = checkpoint["cpu_kernels"]  # what the fixture's training computed with
     assert trained_on.startswith("numpy ") and "; torch " in trained_on
     moved = {**checkpoint, "train_config": {**checkpoint.get("train_config", {}), "output_dir": "elsewhere/policy"},

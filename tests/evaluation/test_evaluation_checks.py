@@ -47,18 +47,9 @@ def test_a_level_no_food_has_is_refused_by_name(models, tmp_path):
 
 
 def test_a_planted_policy_checkpoint_is_refused_in_one_line_before_the_run_and_never_runs(models, tmp_path, plant_pickle, capsys):
-    import yaml
-
-    from grits_lab.cli import main
-    from grits_lab.config import config_to_dict
-
     planted = tmp_path / "policy.pt"
     marker = plant_pickle(models["policy"], planted)
-    config = eval_config(models, tmp_path / "run", methods=["dp"], checkpoints={"policy": str(planted)})
-    path = tmp_path / "evaluate.yaml"
-    path.write_text(yaml.safe_dump(config_to_dict(config)))
-    assert main(["evaluate", str(path), "--serial", "--no-progress"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
+    err = _evaluate_refused(eval_config(models, tmp_path / "run", methods=["dp"], checkpoints={"policy": str(planted)}), tmp_path, capsys)
     assert len(err) == 1 and f"refused checkpoint {planted}" in err[0]
     assert not marker.exists() and not (tmp_path / "run").exists()
 
@@ -119,3 +110,39 @@ def test_records_of_another_protocol_are_not_resumed_and_checkpoints_name_theirs
     pd.DataFrame([old]).to_parquet(run / "episodes.parquet", index=False)
     with pytest.raises(InputError, match=r"protocol unversioned \(before scoop-v4\)"):
         evaluate(config, progress=False)
+
+
+def test_a_planted_file_named_as_scone_demos_is_refused_in_one_line_and_never_runs(models, tmp_path, plant_pickle, capsys):
+    planted = tmp_path / "demos.pt"
+    marker = plant_pickle(models["policy"], planted)
+    err = _evaluate_refused(eval_config(models, tmp_path / "run", methods=["scone"], checkpoints={"demos": str(planted)}), tmp_path, capsys)
+    assert len(err) == 1 and "`checkpoints.demos`" in err[0] and str(planted) in err[0], err
+    assert not marker.exists() and not (tmp_path / "run").exists()
+
+
+def test_provenance_reads_a_planted_checkpoint_without_running_it(models, tmp_path, plant_pickle):
+    """The identity provenance records (weights digest, training kernels) comes from the bytes read once,
+    through the same tensors-only loader as the run's: a file swapped in after the check runs nothing."""
+    from grits_lab.errors import InputError
+    from grits_lab.evaluation.methods import checkpoint_identity, weights_digest
+
+    planted = tmp_path / "policy.pt"
+    marker = plant_pickle(models["policy"], planted)
+    with pytest.raises(InputError, match=f"refused checkpoint {planted}"):
+        checkpoint_identity(planted)
+    with pytest.raises(InputError, match=f"refused checkpoint {planted}"):
+        weights_digest(planted)
+    assert not marker.exists()
+
+
+def _evaluate_refused(config, tmp_path, capsys) -> list[str]:
+    """`grits-lab evaluate` of `config` written to a file: asserts exit 2 and returns the lines of stderr."""
+    import yaml
+
+    from grits_lab.cli import main
+    from grits_lab.config import config_to_dict
+
+    path = tmp_path / "evaluate.yaml"
+    path.write_text(yaml.safe_dump(config_to_dict(config)))
+    assert main(["evaluate", str(path), "--serial", "--no-progress"]) == 2
+    return capsys.readouterr().err.strip().splitlines()

@@ -4,6 +4,7 @@ README, docs/results.md and the experiment pages are rendered from the committed
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pandas as pd
@@ -278,3 +279,21 @@ def test_the_answer_block_says_whether_grits_spills_less_by_how_much_and_on_how_
     (docs / "two" / "paired.csv").write_text("reference,method,paired,spillage_before,spillage_after,spillage_p\ndp,dp_post,20,5,1,0.2\n")
     with pytest.raises(InputError, match=r"two/paired.csv: no `grits` paired with `dp`"):
         render_all(tmp_path)
+
+
+@pytest.mark.parametrize("page_text, fault", [
+    ("<!-- generated: index -->\nold\n\nhand-written paragraph\n<!-- generated: index -->\nold\n<!-- end generated -->\n",
+     r"README.md:1: `<!-- generated: index -->` has no `<!-- end generated -->` before the next block \(line 5\)"),
+    ("<!-- generated: index -->\nold\n", r"README.md:1: `<!-- generated: index -->` has no `<!-- end generated -->`"),
+    ("hand-written\n<!-- end generated -->\n", r"README.md:2: `<!-- end generated -->` closes no block"),
+    ("<!-- generated:index -->\nold\n<!-- end generated -->\n", r"README.md:1: a block marker that does not parse"),
+])
+def test_a_page_whose_markers_do_not_pair_is_refused_by_render_and_check_and_nothing_is_written(tmp_path, capsys, page_text, fault):
+    page = tmp_path / "README.md"
+    page.write_text(page_text)
+    for action in ("check", "render"):
+        assert main(["results", action, "--root", str(tmp_path)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and str(page) in err[0], err
+        assert re.search(fault, err[0]), err
+    assert page.read_text() == page_text
