@@ -12,11 +12,11 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 # The pages that hold measurements with their dates: the generated results (docs/results.md and the
-# docs/experiments/ tree, not matched by docs/*.md), superseded protocols, benchmarks, and the
+# studies/ and docs/archive/ trees, not matched by docs/*.md), superseded protocols, benchmarks, and the
 # protocol's version history and the migration notes, which date what changed.
 DATED_PAGES = {"results.md", "history.md", "benchmarks.md", "protocol.md", "migration.md"}
 REFERENCE_PAGES = sorted(p for p in DOCS.glob("*.md") if p.name not in DATED_PAGES)
-LINKED_PAGES = sorted([ROOT / "README.md", *DOCS.rglob("*.md")])
+LINKED_PAGES = sorted([ROOT / "README.md", *DOCS.rglob("*.md"), *(ROOT / "studies").rglob("*.md")])
 
 DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
 HEADING = re.compile(r"^#{1,6}\s+(.*)")
