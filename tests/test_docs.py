@@ -17,7 +17,7 @@ DOCS = ROOT / "docs"
 # protocols lives in docs/archive/, outside docs/*.md.
 MEASURED_PAGES = {"benchmarks.md"}
 REFERENCE_PAGES = sorted([ROOT / "README.md", *(p for p in DOCS.glob("*.md") if p.name not in MEASURED_PAGES)])
-LINKED_PAGES = sorted([ROOT / "README.md", *DOCS.rglob("*.md")])
+LINKED_PAGES = sorted([ROOT / "README.md", *DOCS.rglob("*.md"), *(ROOT / "studies").rglob("*.md")])
 # The user guide, docs/*.md, is read in one sitting: about 20,000 words at most.
 GUIDE_WORDS = 20_000
 README_LINES, README_PARAGRAPH_WORDS, RESULTS_LINES = 130, 90, 150

@@ -1,4 +1,4 @@
-"""Every config shipped in experiments/ and sweeps/ loads with its own loader (a stale key fails here)."""
+"""Every config shipped in experiments/, sweeps/ and studies/*/configs/ loads with its own loader (a stale key fails here)."""
 
 from __future__ import annotations
 
@@ -7,6 +7,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+STUDIES = ROOT / "studies"
+# Every stage config shipped: the presets, then the studies' own.
+SHIPPED = sorted((ROOT / "experiments").glob("*.yaml")) + sorted(STUDIES.glob("*/configs/*.yaml"))
 
 
 def _loader(path: Path):
@@ -20,7 +23,7 @@ def _loader(path: Path):
     from grits_lab.tune.study_config import load_study_config
 
     name = path.name
-    if path.parent.name == "sweeps":
+    if path.parent.name == "sweeps" or "study_name" in load_yaml(path):
         return load_study_config
     data = load_yaml(path)
     if "stages" in data:
@@ -32,9 +35,9 @@ def _loader(path: Path):
     if name.startswith(("transfer_", "sim_", "scoop_", "guide_")):  # an override of the transfer, the world, the scoop or the guide, merged onto the protocol
         return lambda p: load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(p)))
     if name.startswith("dp_branches_brim_"):  # an override of the branch study (another plan), merged onto it
-        return lambda p: load_evaluation_config(ROOT / "experiments" / "dp_branches_brim.yaml", dict(load_yaml(p)))
+        return lambda p: load_evaluation_config(STUDIES / "outcome_sensitivity" / "configs" / "dp_branches_brim.yaml", dict(load_yaml(p)))
     if name.startswith("dp_rollouts_brim_"):  # an override of the brim rollouts (more trials), merged onto them
-        return lambda p: load_evaluation_config(ROOT / "experiments" / "dp_rollouts_brim.yaml", dict(load_yaml(p)))
+        return lambda p: load_evaluation_config(STUDIES / "brim_guidance" / "configs" / "dp_rollouts_brim.yaml", dict(load_yaml(p)))
     if name.startswith("policy"):
         return load_train_config
     if name.startswith("bc"):
@@ -44,8 +47,7 @@ def _loader(path: Path):
     raise AssertionError(f"no loader known for {path}")
 
 
-@pytest.mark.parametrize("path", sorted((ROOT / "experiments").glob("*.yaml")) + sorted((ROOT / "sweeps").glob("*.yaml")),
-                         ids=lambda p: f"{p.parent.name}/{p.name}")
+@pytest.mark.parametrize("path", SHIPPED + sorted((ROOT / "sweeps").glob("*.yaml")), ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_shipped_config_loads(path):
     assert _loader(path)(path) is not None
 
@@ -54,27 +56,27 @@ def test_the_previous_transfer_override_and_the_oracle_use_seeds_no_evaluation_u
     from grits_lab.config import load_yaml
     from grits_lab.evaluation.evaluation_config import load_evaluation_config
 
-    previous = load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(ROOT / "experiments" / "transfer_previous.yaml")))
+    previous = load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(STUDIES / "post_scoop_losses" / "configs" / "transfer_previous.yaml")))
     assert (previous.transfer.profile, previous.transfer.rest_pull, previous.transfer.slow_to_limits) == ("constant", True, False)
     assert previous.transfer.interpolation == "linear" and previous.transfer.ik_refine is False  # scoop-v8's motion and v9's IK
     assert previous.transfer.heading_free_lift is False  # scoop-v10's options
     oracle = load_evaluation_config(ROOT / "experiments" / "oracle_transfer.yaml")
     assert oracle.methods == ["expert"] and len(oracle.foods) == 16
-    used = {load_evaluation_config(p).seed for p in (ROOT / "experiments").glob("evaluate*.yaml")}
+    used = {load_evaluation_config(p).seed for p in SHIPPED if p.name.startswith("evaluate")}
     used |= {load_yaml(p).get("validation", {}).get("seed") for p in (ROOT / "sweeps").glob("*.yaml")}
     assert oracle.seed not in used
 
 
-@pytest.mark.parametrize("name", ["dp_rollouts_train.yaml", "dp_rollouts_brim.yaml"])
+@pytest.mark.parametrize("name", ["dp_rollouts_train.yaml", "dp_rollouts_brim.yaml"])  # studies/brim_guidance/configs
 def test_the_policys_training_rollouts_are_on_training_foods_and_seeds_nothing_else_uses(name):
     from grits_lab.config import load_yaml
     from grits_lab.evaluation.evaluation_config import load_evaluation_config
     from grits_lab.sim.foods import load_foods
 
-    rollouts = load_evaluation_config(ROOT / "experiments" / name)
+    rollouts = load_evaluation_config(STUDIES / "brim_guidance" / "configs" / name)
     assert rollouts.methods == ["dp"] and rollouts.rollout_chunks
     assert set(rollouts.foods) <= set(load_foods().names("train"))
-    others = [p for p in (ROOT / "experiments").glob("*.yaml") if not p.name.startswith("dp_rollouts_")]
+    others = [p for p in SHIPPED if not p.name.startswith("dp_rollouts_")]
 
     def episodes(config):  # (food, level, episode seed) of every episode an evaluation config plays
         return {(k.food, k.level, k.seed) for k in config.keys(load_foods(config.sim.foods_file))}
@@ -85,7 +87,7 @@ def test_the_policys_training_rollouts_are_on_training_foods_and_seeds_nothing_e
     used |= {load_yaml(p).get("seed") for p in others if "kind" in load_yaml(p)}  # datasets
     assert rollouts.seed not in used
     # the rollout sets share a root seed but no level, so no episode (food, level, seed) twice
-    levels = [set(load_evaluation_config(p).levels) for p in (ROOT / "experiments").glob("dp_rollouts_*.yaml")]
+    levels = [set(load_evaluation_config(p).levels) for p in STUDIES.glob("*/configs/dp_rollouts_*.yaml")]
     assert sum(len(x) for x in levels) == len(set().union(*levels))
 
 
@@ -111,7 +113,7 @@ def _stage_configs_with_a_sim_block() -> list[tuple[Path, str]]:
     from grits_lab.config import load_yaml
 
     out = []
-    for path in sorted((ROOT / "experiments").glob("*.yaml")):
+    for path in SHIPPED:
         data = load_yaml(path)
         if path.name.startswith("evaluate") or data.get("kind") in ("demos", "spillage"):
             out.append((path, "sim"))

@@ -31,7 +31,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "a method stopped early); a method the records do not hold is an error")
     parser.add_argument("--summary-to", metavar="DIR", default=None,
                         help="also write the experiment's committed summary into DIR (summary.csv, stage_cause.csv, claims.csv, "
-                             "provenance.json, config.yaml; grits_lab/report/summary.py), e.g. docs/experiments/NAME; "
+                             "provenance.json, config.yaml; grits_lab/report/summary.py), e.g. studies/STUDY/summaries/NAME; "
                              "then `grits-lab results render`")
     parser.add_argument("--videos", metavar="N", type=int, default=0,
                         help="replay up to N episodes per food under Diffusion Policy and GRITS (same seed) and show the videos "

@@ -8,11 +8,11 @@ import argparse
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "results",
-        help="render README.md, docs/results.md and docs/experiments/*/README.md from the committed summaries",
+        help="render README.md, docs/results.md and the studies' and archive's pages from the committed summaries",
         description=(
             "Rewrite the generated blocks (between `<!-- generated: KIND NAME -->` and `<!-- end generated -->`) of "
-            "README.md, docs/results.md and docs/experiments/*/README.md from docs/experiments/*/summary.csv and its "
-            "companions, written by `grits-lab report RUN_DIR --summary-to docs/experiments/NAME`. Text outside the "
+            "README.md, docs/results.md and the studies' pages from studies/*/summaries/*/summary.csv (and docs/archive/*/) and its "
+            "companions, written by `grits-lab report RUN_DIR --summary-to studies/STUDY/summaries/NAME`. Text outside the "
             "blocks is kept."
         ),
     )

@@ -1,4 +1,8 @@
-"""Render the results pages (README, docs/results.md, docs/experiments/*/README.md) from the committed summaries.
+"""Render the results pages (README, docs/results.md, the studies' pages) from the committed summaries.
+
+An experiment is a folder of committed summaries, found by its name in one of SUMMARY_DIRS:
+`studies/STUDY/summaries/NAME/` (the current protocol's runs, one study a question) or
+`docs/archive/NAME/` (runs of a superseded protocol version). Names are unique across them.
 
 A page holds generated blocks between two markers; everything outside them is hand-written and kept:
 
@@ -7,7 +11,7 @@ A page holds generated blocks between two markers; everything outside them is ha
     <!-- end generated -->
 
 KIND is one of BLOCKS: `outcomes`, `stages`, `provenance`, `headline` and `claims` read the
-summary files of docs/experiments/EXPERIMENT/ (grits_lab/report/summary.py); `comparison` reads
+summary files of the experiment's folder (grits_lab/report/summary.py); `comparison` reads
 the paired comparison `grits-lab compare-runs` writes there; `paired` every method against Diffusion
 Policy on the same episodes; `per_food` each method's spills and successes food by food (the page's
 episodes.csv); `sweep_reference` a sweep's front against its reference methods and
@@ -16,7 +20,8 @@ episodes.csv); `sweep_reference` a sweep's front against its reference methods a
 GRITS spill less than Diffusion Policy during the scoop, by how much, on how many chains and
 seeds), each NAME one chain of checkpoints; `shift BEFORE..AFTER[+AFTER...]`
 sets each method's outcomes in one summary beside another's (a protocol before and after a change,
-whose records need not exist any more); `index` lists every experiment folder. `grits-lab results
+whose records need not exist any more); `index [STUDY|archive]` lists the experiment folders of one
+study, of the archive, or (no name) of every study. `grits-lab results
 check` (and tests/report/test_results_pages.py) fails when a page differs from what its summaries
 render.
 """
@@ -45,7 +50,10 @@ from grits_lab.report.sweep import sweep_reference_table
 from grits_lab.report.vocabulary import MAIN_METHODS, PAPER_RESULTS, UNSEEN_FOODS, food_display, ordered
 from grits_lab.sim.spill_metrics import SPILL_CAUSES, SPILL_STAGES
 
-EXPERIMENTS_DIR = Path("docs") / "experiments"
+STUDIES_DIR = Path("studies")
+ARCHIVE_DIR = Path("docs") / "archive"
+# Where experiment folders live, as globs from the repository's root: every study's summaries, then the archive.
+SUMMARY_DIRS = (str(STUDIES_DIR / "*" / "summaries"), str(ARCHIVE_DIR))
 PAGE_FILE = "README.md"
 OPEN_MARKER, END_MARKER = "<!-- generated: KIND [NAME] -->", "<!-- end generated -->"
 _MARKER_LINE = re.compile(r"^\s*<!--\s*(end\s+)?generated\b.*$", re.M)  # anything that looks like a marker
@@ -71,10 +79,25 @@ SHIFT_HEADERS = {
 }
 
 
-def pages(root: str | Path) -> list[Path]:
-    """The pages that may hold generated blocks: README.md, docs/results.md and every experiment's page."""
+def experiment_folders(root: str | Path) -> dict[str, Path]:
+    """Every experiment's name -> its folder, studies first, then the archive (SUMMARY_DIRS).
+    InputError when two folders share a name (a block could not tell which one it means)."""
     root = Path(root)
-    found = [root / "README.md", root / "docs" / "results.md", *sorted((root / EXPERIMENTS_DIR).glob(f"*/{PAGE_FILE}"))]
+    found: dict[str, Path] = {}
+    for pattern in SUMMARY_DIRS:
+        for folder in sorted(root.glob(f"{pattern}/*/")):
+            if folder.name in found:
+                raise InputError(f"two experiments are named `{folder.name}`: {found[folder.name]} and {folder}")
+            found[folder.name] = folder
+    return found
+
+
+def pages(root: str | Path) -> list[Path]:
+    """The pages that may hold generated blocks: README.md, docs/results.md, every study's README,
+    the archive's README and every experiment's page."""
+    root = Path(root)
+    found = [root / "README.md", root / "docs" / "results.md", *sorted((root / STUDIES_DIR).glob(f"*/{PAGE_FILE}")),
+             root / ARCHIVE_DIR / PAGE_FILE, *(folder / PAGE_FILE for folder in experiment_folders(root).values())]
     return [p for p in found if p.is_file()]
 
 
@@ -156,15 +179,22 @@ class _NotSummarised(Exception):
     """An experiment folder without its summary yet: the block says so and names the command."""
 
 
+def _experiment(root: Path, name: str) -> Path:
+    """The experiment NAME's folder; InputError when no folder has that name (a misspelt name)."""
+    folder = experiment_folders(root).get(name)
+    if folder is None:
+        raise InputError(f"no experiment `{name}`: no folder of that name in {' or '.join(SUMMARY_DIRS)}")
+    return folder
+
+
 def _folder(root: Path, name: str, needs: str = SUMMARY_FILE) -> Path:
-    """docs/experiments/NAME holding the file `needs`; InputError when the folder does not exist (a
-    misspelt name), _NotSummarised naming the command that writes a missing file."""
-    folder = root / EXPERIMENTS_DIR / name
-    if not folder.is_dir():
-        raise InputError(f"no experiment `{name}`: {folder} does not exist")
+    """The experiment NAME's folder (`experiment_folders`) holding the file `needs`; InputError when no
+    folder has that name (a misspelt name), _NotSummarised naming the command that writes a missing file."""
+    folder = _experiment(root, name)
     if not (folder / needs).is_file():
-        writer = (f"grits-lab compare-runs BEFORE_RUN AFTER_RUN --output-dir {EXPERIMENTS_DIR / name}" if needs == COMPARISON_FILE
-                  else f"grits-lab report RUN_DIR --summary-to {EXPERIMENTS_DIR / name}")
+        there = folder.relative_to(root)
+        writer = (f"grits-lab compare-runs BEFORE_RUN AFTER_RUN --output-dir {there}" if needs == COMPARISON_FILE
+                  else f"grits-lab report RUN_DIR --summary-to {there}")
         raise _NotSummarised(f"No {'comparison' if needs == COMPARISON_FILE else 'summary'} yet: `{writer}`, "
                              "then `grits-lab results render`.")
     return folder
@@ -357,7 +387,7 @@ def claims_block(root: Path, name: str, here: Path) -> str:
 
 
 def comparison_block(root: Path, name: str, here: Path) -> str:
-    """Two runs on the same seeds, paired (`grits-lab compare-runs ... --output-dir docs/experiments/NAME`)."""
+    """Two runs on the same seeds, paired (`grits-lab compare-runs ... --output-dir FOLDER`)."""
     table = pd.read_csv(_folder(root, name, needs=COMPARISON_FILE) / COMPARISON_FILE)
     return f"{comparison_markdown(table)} File: [{COMPARISON_FILE}]({_link(root, name, COMPARISON_FILE, here)})."
 
@@ -403,22 +433,33 @@ def shift_block(root: Path, name: str, here: Path) -> str:
         for outcome in SHIFT_HEADERS:
             was, now = _lookup(before, method, outcome), _lookup(after, method, outcome)
             cells.append(" → ".join("—" if r is None else f"{int(r['k'])}/{int(r['n'])}" for r in (was, now)))
-        rows.append([method_name, *cells, f"[{source[method]}]({os.path.relpath(root / EXPERIMENTS_DIR / source[method] / PAGE_FILE, here)})"])
+        rows.append([method_name, *cells, f"[{source[method]}]({_link(root, source[method], PAGE_FILE, here)})"])
     if not rows:
         return f"No method of {before_name} is in {', '.join(after_names.split('+'))}."
     table = markdown_table(["Method", *SHIFT_HEADERS.values(), "After"], rows)
     return (f"{table}\n\nEpisodes with each outcome (k/n), [{before_name}]"
-            f"({os.path.relpath(root / EXPERIMENTS_DIR / before_name / PAGE_FILE, here)}) → the run named under After; "
+            f"({_link(root, before_name, PAGE_FILE, here)}) → the run named under After; "
             "in the lift, carry, pour and after the pour: episodes with a particle lost in that stage (an episode may lose "
             "food in more than one); lifted food delivered: of the episodes that lifted food. Counts from the two runs' "
             "summaries, not paired episode by episode.")
 
 
 def index_block(root: Path, name: str | None, here: Path) -> str:
-    """Every experiment folder: its page's title, protocol and episodes per method."""
+    """The experiment folders of study `name` (`archive`: the archive's; none: every study's, study by
+    study): each page's title, protocol and episodes per method."""
+    if name == "archive":
+        folders = sorted((root / ARCHIVE_DIR).glob("*/"))
+    elif name:
+        if not (root / STUDIES_DIR / name).is_dir():
+            raise InputError(f"the index block names no study `{name}`: {root / STUDIES_DIR / name} does not exist")
+        folders = sorted((root / STUDIES_DIR / name / "summaries").glob("*/"))
+    else:
+        folders = sorted((root / STUDIES_DIR).glob("*/summaries/*/"))
     rows = []
-    for page in sorted((root / EXPERIMENTS_DIR).glob(f"*/{PAGE_FILE}")):
-        folder = page.parent
+    for folder in folders:
+        page = folder / PAGE_FILE
+        if not page.is_file():
+            continue
         title = next((line[2:].strip() for line in page.read_text().splitlines() if line.startswith("# ")), folder.name)
         link = os.path.relpath(page, here)
         if (folder / PROVENANCE_FILE).is_file():
@@ -443,10 +484,11 @@ def answer_block(root: Path, name: str, here: Path) -> str:
     experiment holds no `grits` against `dp` pairing."""
     rows = []
     for experiment in name.split("+"):
-        paired = pd.read_csv(_folder(root, experiment, needs=PAIRED_METHODS_FILE) / PAIRED_METHODS_FILE)
+        paired_file = _folder(root, experiment, needs=PAIRED_METHODS_FILE) / PAIRED_METHODS_FILE
+        paired = pd.read_csv(paired_file)
         pair = paired[(paired["reference"] == ANSWER_REFERENCE) & (paired["method"] == ANSWER_METHOD)]
         if pair.empty:
-            raise InputError(f"{EXPERIMENTS_DIR / experiment / PAIRED_METHODS_FILE}: no `{ANSWER_METHOD}` paired with "
+            raise InputError(f"{paired_file.relative_to(root)}: no `{ANSWER_METHOD}` paired with "
                              f"`{ANSWER_REFERENCE}`, which the answer block reads")
         summary, provenance = _summary(root, experiment), _provenance(root, experiment)
         reference = provenance["methods"][ANSWER_REFERENCE]
@@ -491,7 +533,8 @@ BLOCKS: dict[str, Callable[[Path, str, Path], str]] = {
 
 
 def _link(root: Path, name: str, file: str, here: Path) -> str:
-    return os.path.relpath(root / EXPERIMENTS_DIR / name / file, here)
+    """The relative link from the folder `here` to `file` in the experiment NAME's folder."""
+    return os.path.relpath(_experiment(root, name) / file, here)
 
 
 def _span(trials: list[int]) -> str:

@@ -5,7 +5,7 @@ What the report expects in RUN_DIR (written by `grits-lab evaluate` and `grits-l
 * episode records, one row per episode with the columns of grits_lab/records.py, as Parquet:
   `episodes.parquet`, or several `*.parquet` shards, directly in RUN_DIR or in RUN_DIR/records/
   or RUN_DIR/episodes/ (RUN_DIR may also be a single .parquet file), or as `episodes.csv` directly in
-  RUN_DIR: a committed summary page (`--summary-to docs/experiments/NAME`) is a run. Rows that appear in more
+  RUN_DIR: a committed summary page (`--summary-to studies/STUDY/summaries/NAME`) is a run. Rows that appear in more
   than one file (a consolidated file beside its shards) are counted once. Records of further run
   directories can join them (`load_run(..., also=...)`, `grits-lab report RUN_DIR OTHER_RUN ...`).
 * optional run metadata: `config.yaml` (and any other *.yaml at the top level) and

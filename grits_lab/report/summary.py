@@ -1,6 +1,6 @@
 """An experiment's committed summary: counts with Wilson intervals per method, spills by stage and cause, provenance.
 
-`grits-lab report RUN_DIR --summary-to docs/experiments/NAME` writes, into NAME's folder:
+`grits-lab report RUN_DIR --summary-to studies/STUDY/summaries/NAME` writes, into NAME's folder:
 
     summary.csv       one row per method and outcome: k, n, rate, Wilson 95 % bounds (OUTCOMES)
     stage_cause.csv   one row per method, stage and cause: episodes with such a spill, particles
@@ -11,7 +11,7 @@
     provenance.json   protocol, commits, machine, dates, wall time, checkpoint digests, episodes per method
     config.yaml       the run's config as it ran (RUN_DIR/config.yaml)
     episodes.csv      the episode records themselves, one row per episode (grits_lab/records.py), so that a
-                      page is a run the report reads: `grits-lab report NEW_RUN docs/experiments/NAME` adds
+                      page is a run the report reads: `grits-lab report NEW_RUN studies/STUDY/summaries/NAME` adds
                       the trials of another sitting or machine (`first_trial`) to the same table
 
 The files count what the records hold and nothing else: a method with fewer episodes than its

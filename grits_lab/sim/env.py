@@ -384,7 +384,7 @@ class ScoopEnv:
         """The physics time step from now on, seconds (PyBullet's fixedTimeStep); None:
         `SimConfig.time_step`. Every reset starts again at the config's. The stages after the
         scoop halve it (`TransferSettings.time_step`): a heap carried at 1/120 s creeps off the
-        spoon, at 1/240 s it stays (docs/experiments/oracle_high_physics_fine). An action keeps its
+        spoon, at 1/240 s it stays (docs/archive/oracle_high_physics_fine). An action keeps its
         control period (`SimConfig.control_hz`), run over `substeps` steps; the arm's motors keep their
         gain per second (`robot.ARM_POSITION_GAIN_PER_S`).
 

@@ -54,7 +54,7 @@ class TransferSettings:
     # "tip" (scoop-v6): turn the spoon about its tip, food sliding off the lipless tip while the
     # handle and the hand on it stay above the spoon. "roll" (scoop-v5): turn it about its own x
     # axis, food leaving over the side lip; the hand, 11 cm up the steep handle, swings down
-    # beside the spoon and onto the table (docs/experiments/oracle_transfer_v5).
+    # beside the spoon and onto the table (docs/archive/oracle_transfer_v5).
     pour_axis: Literal["roll", "tip"] = "tip"
     pour_angle_deg: float = 90.0  # turn of the spoon about `pour_axis` to empty it (the roll's was 120)
     # The spoon's heading at the pour, degrees from the one `heading` gives (radial: pointing away
@@ -130,7 +130,7 @@ class TransferSettings:
     # heap carried on the spoon at under 1 % of gravity's acceleration creeps off it when contacts
     # are resolved in 1/120 s steps and stays at 1/240 s (the authors' code used 1/256 s): on the
     # oracle's 60 high-level episodes 7 lost food in the carry at 1/120 s, 10 with a 3x slower carry
-    # and 2 at 1/240 s (docs/experiments/oracle_high_physics_fine). The scoop keeps its step, as
+    # and 2 at 1/240 s (docs/archive/oracle_high_physics_fine). The scoop keeps its step, as
     # it keeps its solver iterations: its datasets and checkpoints were made with it. An action
     # keeps its control period and its IK pieces (`sim.substeps` a period); each piece runs over
     # more physics steps (`ScoopEnv.set_time_step`).

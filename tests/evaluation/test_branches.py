@@ -230,10 +230,10 @@ def test_evaluate_branch_draw_sets_the_draw_and_is_refused_without_a_branch_plan
     assert main(["evaluate", "experiments/evaluate_quick.yaml", "--branch-draw", "1", "--output-dir", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "`scoop.branch_draw` must be 0 unless scoop.branch_plan" in err[0] and not out.exists()
-    study = load_evaluation_config("experiments/dp_branches_brim.yaml", {"scoop": {"branch_draw": 3}})
+    study = load_evaluation_config("studies/outcome_sensitivity/configs/dp_branches_brim.yaml", {"scoop": {"branch_draw": 3}})
     assert (study.scoop.branch_plan, study.scoop.branch_draw, study.transfer.enabled) == (1, 3, False)
     # --action-offset-draw N is scoop.action_offset_draw, and needs a nudge to draw directions for
-    assert main(["evaluate", "experiments/dp_branches_brim.yaml", "--action-offset-draw", "3", "--output-dir", str(out)]) == 2
+    assert main(["evaluate", "studies/outcome_sensitivity/configs/dp_branches_brim.yaml", "--action-offset-draw", "3", "--output-dir", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "`scoop.action_offset_draw` must be 0 unless scoop.action_offset" in err[0] and not out.exists()
 

@@ -99,11 +99,11 @@ def _scene_obstacles(env, target_xy, seed=2):
 
 
 def _rolled(settings_class, **overrides):
-    """Transfer settings with scoop-v5's roll pour (experiments/transfer_pour_roll.yaml): by the robot's base
+    """Transfer settings with scoop-v5's roll pour (studies/post_scoop_losses/configs/transfer_pour_roll.yaml): by the robot's base
     PyBullet's solver alone stops short of its first option, which the reach-check tests need."""
     from grits_lab.config import load_yaml
 
-    return settings_class(**{**load_yaml(REPO / "experiments" / "transfer_pour_roll.yaml")["transfer"], **overrides})
+    return settings_class(**{**load_yaml(REPO / "studies" / "post_scoop_losses" / "configs" / "transfer_pour_roll.yaml")["transfer"], **overrides})
 
 
 def test_transfer_options_start_with_the_configured_one_and_never_repeat():

@@ -21,8 +21,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_the_committed_pages_match_their_summaries():
     stale = drifted(ROOT)
-    assert not stale, (f"{', '.join(str(p.relative_to(ROOT)) for p in stale)} differ from docs/experiments/*/summary.csv: "
-                       "run `grits-lab results render` (a new run: `grits-lab report RUN_DIR --summary-to docs/experiments/NAME` first)")
+    assert not stale, (f"{', '.join(str(p.relative_to(ROOT)) for p in stale)} differ from studies/*/summaries/*/summary.csv: "
+                       "run `grits-lab results render` (a new run: `grits-lab report RUN_DIR --summary-to studies/s/summaries/NAME` first)")
     assert ROOT / "README.md" in render_all(ROOT) and ROOT / "docs" / "results.md" in render_all(ROOT)
 
 
@@ -48,7 +48,7 @@ def _records(tmp_path: Path) -> Path:
 
 def test_the_summary_counts_what_the_records_hold_with_wilson_intervals(tmp_path, capsys):
     run = _records(tmp_path)
-    out = tmp_path / "docs" / "experiments" / "tiny"
+    out = tmp_path / "studies" / "s" / "summaries" / "tiny"
     assert main(["report", str(run), "--output-dir", str(tmp_path / "report"), "--summary-to", str(out)]) == 0
     summary = pd.read_csv(out / "summary.csv").set_index(["method", "outcome"])
     assert summary.loc[("dp", "task_success"), ["k", "n"]].tolist() == [1, 3]
@@ -71,37 +71,39 @@ def test_the_summary_counts_what_the_records_hold_with_wilson_intervals(tmp_path
 def test_rendering_replaces_only_the_generated_blocks_and_check_finds_the_drift(tmp_path, capsys):
     run = _records(tmp_path)
     assert main(["report", str(run), "--output-dir", str(tmp_path / "report"), "--summary-to",
-                 str(tmp_path / "docs" / "experiments" / "tiny")]) == 0
-    page = tmp_path / "docs" / "experiments" / "tiny" / "README.md"
+                 str(tmp_path / "studies" / "s" / "summaries" / "tiny")]) == 0
+    page = tmp_path / "studies" / "s" / "summaries" / "tiny" / "README.md"
     page.write_text("# Tiny: does it count?\n\nWritten by hand.\n\n<!-- generated: outcomes tiny -->\nold\n<!-- end generated -->\n\nAfter.\n")
     results = tmp_path / "docs" / "results.md"
+    results.parent.mkdir(exist_ok=True)
     results.write_text("Intro.\n<!-- generated: headline tiny -->\n<!-- end generated -->\n<!-- generated: index -->\n<!-- end generated -->\n")
     capsys.readouterr()
     assert main(["results", "check", "--root", str(tmp_path)]) == 1
-    assert "docs/experiments/tiny/README.md differs from its summaries" in capsys.readouterr().out
+    assert "studies/s/summaries/tiny/README.md differs from its summaries" in capsys.readouterr().out
     assert sorted(write_all(tmp_path)) == sorted([page, results]) and not drifted(tmp_path)
     text = page.read_text()
     assert text.startswith("# Tiny: does it count?\n\nWritten by hand.\n") and text.endswith("<!-- end generated -->\n\nAfter.\n")
     assert "| Diffusion Policy | 3 | 33.3% [6.1%, 79.2%] (1/3) |" in text and "old" not in text
     index = results.read_text()
-    assert "| [tiny](experiments/tiny/README.md) | Tiny: does it count? |" in index
+    assert "| [tiny](../studies/s/summaries/tiny/README.md) | Tiny: does it count? |" in index
     assert "| GRITS | 1 | 0.0% (0/1) | 82.0% |" in index  # the paper's number beside the simulation's
     assert main(["results", "check", "--root", str(tmp_path)]) == 0
 
 
 def test_a_block_names_the_command_that_writes_a_missing_summary_and_refuses_an_unknown_experiment(tmp_path):
-    (tmp_path / "docs" / "experiments" / "later").mkdir(parents=True)
+    (tmp_path / "studies" / "s" / "summaries" / "later").mkdir(parents=True)
     results = tmp_path / "docs" / "results.md"
+    results.parent.mkdir(exist_ok=True)
     results.write_text("<!-- generated: outcomes later -->\n<!-- end generated -->\n")
-    assert "No summary yet: `grits-lab report RUN_DIR --summary-to docs/experiments/later`" in render_all(tmp_path)[results]
+    assert "No summary yet: `grits-lab report RUN_DIR --summary-to studies/s/summaries/later`" in render_all(tmp_path)[results]
     results.write_text("<!-- generated: outcomes nothing -->\n<!-- end generated -->\n")
-    with pytest.raises(InputError, match=r"no experiment `nothing`: .*docs/experiments/nothing does not exist"):
+    with pytest.raises(InputError, match=r"no experiment `nothing`: no folder of that name in studies/\*/summaries or docs/archive"):
         render_all(tmp_path)
 
 
 def test_a_shift_block_sets_each_methods_counts_before_beside_after(tmp_path):
     run = _records(tmp_path)
-    docs = tmp_path / "docs" / "experiments"
+    docs = tmp_path / "studies" / "s" / "summaries"
     assert main(["report", str(run), "--output-dir", str(tmp_path / "r1"), "--summary-to", str(docs / "before")]) == 0
     after = pd.read_parquet(run / "episodes.parquet")
     after = after[after["method"] == "dp"].copy()
@@ -146,7 +148,7 @@ def test_a_page_is_a_run_the_report_reads_so_a_protocol_split_across_sittings_is
         runs[name] = tmp_path / name
         runs[name].mkdir()
         rows.to_parquet(runs[name] / "episodes.parquet")
-    docs = tmp_path / "docs" / "experiments"
+    docs = tmp_path / "studies" / "s" / "summaries"
     assert main(["report", str(runs["whole"]), "--output-dir", str(tmp_path / "r0"), "--summary-to", str(docs / "whole")]) == 0
     assert main(["report", str(runs["first"]), "--output-dir", str(tmp_path / "r1"), "--summary-to", str(docs / "first")]) == 0
     page = pd.read_csv(docs / "first" / "episodes.csv")
@@ -171,7 +173,7 @@ def test_the_summary_counts_episodes_per_cpu_kernels_and_the_page_names_them(tmp
     frame.to_parquet(run / "episodes.parquet")
     provenance = json.loads((run / "provenance.json").read_text())
     (run / "provenance.json").write_text(json.dumps({**provenance, "cpu": "AMD EPYC"}))
-    out = tmp_path / "docs" / "experiments" / "tiny"
+    out = tmp_path / "studies" / "s" / "summaries" / "tiny"
     assert main(["report", str(run), "--output-dir", str(tmp_path / "report"), "--summary-to", str(out)]) == 0
     machine = json.loads((out / "provenance.json").read_text())["machine"]
     assert machine["cpu"] == "AMD EPYC" and machine["host"] == "box"
@@ -198,8 +200,8 @@ def test_a_per_food_block_counts_each_methods_outcomes_food_by_food_without_erro
     run = tmp_path / "run"
     run.mkdir()
     pd.DataFrame(rows).to_parquet(run / "episodes.parquet")
-    folder = tmp_path / "docs" / "experiments" / "foods"
-    write_summary(load_run(run), folder, "grits-lab report run --summary-to docs/experiments/foods")
+    folder = tmp_path / "studies" / "s" / "summaries" / "foods"
+    write_summary(load_run(run), folder, "grits-lab report run --summary-to studies/s/summaries/foods")
     (folder / "README.md").write_text("# Foods\n\n<!-- generated: per_food foods -->\n<!-- end generated -->\n")
     page = render_all(tmp_path)[folder / "README.md"]
     scoop, before_pour, success = page.split("*Spill during the scoop*")[1], page.split("*Spill before the pour*")[1], page.split("*Task success*")[1]
@@ -217,7 +219,7 @@ def test_the_page_names_the_code_each_methods_records_ran_not_only_the_latest_ru
     first, second = "a" * 40, "b" * 40 + " (with uncommitted changes)"
     frame["code_commit"] = [first, first, second, None]  # grits's record predates the column
     frame.to_parquet(run / "episodes.parquet")
-    out = tmp_path / "docs" / "experiments" / "tiny"
+    out = tmp_path / "studies" / "s" / "summaries" / "tiny"
     assert main(["report", str(run), "--output-dir", str(tmp_path / "report"), "--summary-to", str(out)]) == 0
     methods = json.loads((out / "provenance.json").read_text())["methods"]
     assert methods["dp"]["code commits"] == [first, second] and "code commits" not in methods["grits"]
@@ -230,7 +232,7 @@ def test_the_page_names_the_code_each_methods_records_ran_not_only_the_latest_ru
 
 def test_without_commits_in_the_records_the_page_names_the_runs_provenance(tmp_path):
     run = _records(tmp_path)
-    out = tmp_path / "docs" / "experiments" / "tiny"
+    out = tmp_path / "studies" / "s" / "summaries" / "tiny"
     assert main(["report", str(run), "--output-dir", str(tmp_path / "report"), "--summary-to", str(out)]) == 0
     assert "records' code: `abc123`." in provenance_block(tmp_path, "tiny", out)
 
@@ -244,10 +246,10 @@ def test_the_summary_reads_the_code_commit_before_it_writes_into_the_page(tmp_pa
     run = tmp_path / "run"
     run.mkdir()
     pd.DataFrame([episode("dp", "sago", "high", 0, "success")]).to_parquet(run / "episodes.parquet")
-    page = tmp_path / "docs" / "experiments" / "commit"
+    page = tmp_path / "studies" / "s" / "summaries" / "commit"
     seen = []
     monkeypatch.setattr(summary, "git_commit", lambda: seen.append(sorted(p.name for p in page.glob("*"))) or "abc123")
-    summary.write_summary(load_run(run), page, "grits-lab report run --summary-to docs/experiments/commit")
+    summary.write_summary(load_run(run), page, "grits-lab report run --summary-to studies/s/summaries/commit")
     assert seen == [[]]
     assert json.loads((page / "provenance.json").read_text())["summary code commit"] == "abc123"
 
@@ -265,19 +267,20 @@ def _chain(docs: Path, name: str, policy: str, dp_spills: int, grits_spills: int
 
 
 def test_the_answer_block_says_whether_grits_spills_less_by_how_much_and_on_how_many_chains_and_seeds(tmp_path):
-    docs = tmp_path / "docs" / "experiments"
+    docs = tmp_path / "studies" / "protocol" / "summaries"
     _chain(docs, "one", "aaaa", dp_spills=9, grits_spills=1, only_dp=8, only_grits=0, p=0.0078)
     _chain(docs, "two", "bbbb", dp_spills=5, grits_spills=4, only_dp=3, only_grits=2, p=1.0)
     page = tmp_path / "docs" / "results.md"
+    page.parent.mkdir()
     page.write_text("<!-- generated: answer one+two -->\n<!-- end generated -->\n")
     text = render_all(tmp_path)[page]
     assert "at the levels high, low? On 1 of 2 chains: the exact sign test on the same seeds gives p < 0.05 for fewer spills on 1 of 2 chains." in text
-    assert "5.0% [1.0%, 50.0%] (1/20) against 45.0% [1.0%, 50.0%] (9/20) on [one](experiments/one/README.md) (paired 1 against 9, p 0.0078)" in text
+    assert "5.0% [1.0%, 50.0%] (1/20) against 45.0% [1.0%, 50.0%] (9/20) on [one](../studies/protocol/summaries/one/README.md) (paired 1 against 9, p 0.0078)" in text
     assert "On 2 chains" in text and "`aaaa`, `bbbb`" in text and "40 paired seeds (20, 20) of 2 unseen foods" in text
     page.write_text("<!-- generated: answer two -->\n<!-- end generated -->\n")
     assert "Not measurably" in render_all(tmp_path)[page]
     (docs / "two" / "paired.csv").write_text("reference,method,paired,spillage_before,spillage_after,spillage_p\ndp,dp_post,20,5,1,0.2\n")
-    with pytest.raises(InputError, match=r"two/paired.csv: no `grits` paired with `dp`"):
+    with pytest.raises(InputError, match=r"studies/protocol/summaries/two/paired.csv: no `grits` paired with `dp`"):
         render_all(tmp_path)
 
 

@@ -89,7 +89,7 @@ def test_an_experiment_page_renders_the_comparison_written_into_its_folder(tmp_p
 
     _run([("success", 40, 0), ("transfer_fail", 40, 2)], tmp_path, "v1")
     _run([("success", 40, 0), ("success", 40, 0)], tmp_path, "v2")
-    folder = tmp_path / "docs" / "experiments" / "v2"
+    folder = tmp_path / "studies" / "s" / "summaries" / "v2"
     assert main(["compare-runs", str(tmp_path / "v1"), str(tmp_path / "v2"), "--output-dir", str(folder)]) == 0
     (folder / "README.md").write_text("# v2\n\n<!-- generated: comparison v2 -->\n<!-- end generated -->\n")
     page = render_all(tmp_path)[folder / "README.md"]
@@ -128,8 +128,8 @@ def test_every_method_is_paired_with_dp_on_the_episodes_both_ran(tmp_path):
     build_report(run, tmp_path / "report")
     text = (tmp_path / "report" / "report.md").read_text()
     assert "## Paired with Diffusion Policy" in text and "| 2 → 1 (−1 +0, p 1) " in text
-    folder = tmp_path / "docs" / "experiments" / "pair"
-    write_summary(load_run(run), folder, "grits-lab report run --summary-to docs/experiments/pair")
+    folder = tmp_path / "studies" / "s" / "summaries" / "pair"
+    write_summary(load_run(run), folder, "grits-lab report run --summary-to studies/s/summaries/pair")
     assert (folder / "paired.csv").is_file()
     (folder / "README.md").write_text("# Pair\n\n<!-- generated: paired pair -->\n<!-- end generated -->\n")
     page = render_all(tmp_path)[folder / "README.md"]
@@ -171,8 +171,8 @@ def test_a_method_at_two_guidance_settings_is_paired_with_dp_once_per_setting_an
     reversed_records = load_run(run).episodes.iloc[::-1].reset_index(drop=True)
     again = compare_methods(reversed_records)
     assert again[again["reference"] != "dp"].iloc[0]["reference_name"] == "GRITS (rho=2.5, s=30)"
-    folder = tmp_path / "docs" / "experiments" / "pair"
-    write_summary(load_run(run), folder, "grits-lab report run --summary-to docs/experiments/pair")
+    folder = tmp_path / "studies" / "s" / "summaries" / "pair"
+    write_summary(load_run(run), folder, "grits-lab report run --summary-to studies/s/summaries/pair")
     (folder / "README.md").write_text("# Pair\n\n<!-- generated: paired pair -->\n<!-- end generated -->\n")
     page = render_all(tmp_path)[folder / "README.md"]
     assert "| GRITS (rho=0.07, s=78) | Diffusion Policy | 3 | 1 → 2 (−0 +1, p 1) | 2 → 1 (−1 +0, p 1) |" in page

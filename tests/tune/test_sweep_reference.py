@@ -213,7 +213,7 @@ def test_a_sweeps_summary_page_renders_its_front_against_the_reference(sweep_fil
 
     config = load_study_config(sweep_file(reference=["dp"], n_trials=3, objective={"mode": "multi"}))
     summary = run_sweep(config, progress=False, plots=False)
-    page = tmp_path / "site" / "docs" / "experiments" / "sweep"
+    page = tmp_path / "site" / "studies" / "s" / "summaries" / "sweep"
     write_summary(load_run(config.study_dir), page, "grits-lab report STUDY --summary-to PAGE")
     assert (page / "reference.csv").read_text() == (config.study_dir / "reference.csv").read_text()
     text = render_page("<!-- generated: sweep_reference sweep -->\n<!-- end generated -->\n", page / "README.md", tmp_path / "site")
@@ -239,7 +239,7 @@ def test_a_sweeps_summary_page_dates_the_sweep_by_its_first_trial_and_names_what
 
     config = load_study_config(sweep_file(n_trials=2))
     run_sweep(config, progress=False, plots=False)
-    page = tmp_path / "site" / "docs" / "experiments" / "sweep"
+    page = tmp_path / "site" / "studies" / "s" / "summaries" / "sweep"
     write_summary(load_run(config.study_dir), page, "grits-lab report STUDY --summary-to PAGE")
     first = pd.to_datetime(pd.read_csv(config.study_dir / "trials.csv")["datetime_start"]).min()
     provenance = json.loads((page / "provenance.json").read_text())
@@ -279,7 +279,7 @@ def test_trials_sort_by_rho_as_a_number_even_when_the_file_holds_text():
 def test_a_page_says_when_no_trial_on_the_front_is_paired(tmp_path):
     from grits_lab.report.results_pages import render_page
 
-    page = tmp_path / "docs" / "experiments" / "sweep"
+    page = tmp_path / "studies" / "s" / "summaries" / "sweep"
     page.mkdir(parents=True)
     _stored_reference([False, False], [0.1, 1.0]).to_csv(page / "reference.csv", index=False)
     text = render_page("<!-- generated: sweep_reference sweep -->\n<!-- end generated -->\n", page / "README.md", tmp_path)

@@ -1,0 +1,1 @@
+"""Study: outcome sensitivity (its question and commands: README.md)."""

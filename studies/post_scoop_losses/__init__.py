@@ -1,0 +1,1 @@
+"""Study: losses after the scoop (its question and commands: README.md)."""

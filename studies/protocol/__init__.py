@@ -1,0 +1,1 @@
+"""Study: the protocol's headline (its question and commands: README.md)."""

@@ -1,0 +1,1 @@
+"""Study: stress search (its question and commands: README.md)."""
