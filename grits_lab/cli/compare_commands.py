@@ -66,8 +66,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _compare_runs(args: argparse.Namespace) -> int:
+    from grits_lab.io import check_writable_dir
     from grits_lab.report.run_compare import compare_run_dirs, write_comparison
 
+    if args.output_dir:
+        check_writable_dir(args.output_dir)  # before the comparison, not after it
     table, markdown = compare_run_dirs(args.before, args.after, ceiling=args.ceiling)
     print(markdown)
     if args.output_dir:
@@ -118,6 +121,7 @@ def _run(args: argparse.Namespace) -> int:
 
     from grits_lab.config import load_config
     from grits_lab.errors import InputError
+    from grits_lab.io import check_writable_dir
     from grits_lab.spillage.compare import compare_predictions, comparison_markdown, predict_all, write_comparison
     from grits_lab.spillage.predictor_config import PredictorConfig
     from grits_lab.spillage.predictor_training import run_dir
@@ -147,11 +151,12 @@ def _run(args: argparse.Namespace) -> int:
     label = args.label or configs[0].data.label
     if args.branches:
         return _branches(args, checkpoints, configs, label)
-    predictions = predict_all(checkpoints, args.eval, label=label)
-    comparison = compare_predictions(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed, n_bins=configs[0].train.ece_bins, label=label)
     out = Path(configs[0].output_dir) / f"comparison_{'+'.join(Path(d).name for d in args.eval)}"
     if label != "chunk":  # scored against another label: its own table, beside the chunk label's
         out = out.with_name(f"{out.name}_{label}")
+    check_writable_dir(out)  # before the predictions, not after them
+    predictions = predict_all(checkpoints, args.eval, label=label)
+    comparison = compare_predictions(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed, n_bins=configs[0].train.ece_bins, label=label)
     files = write_comparison(comparison, ", ".join(args.eval), out)
     print(comparison_markdown(comparison, ", ".join(args.eval)))
     print(f"written: {', '.join(str(f) for f in files)}")

@@ -21,7 +21,7 @@ import pandas as pd
 
 from grits_lab.errors import InputError
 from grits_lab.intervals import sign_test_p
-from grits_lab.io import write_text_atomic
+from grits_lab.io import ensure_writable_dir, write_text_atomic
 from grits_lab.markdown import markdown_table
 from grits_lab.records import CPU_KERNELS
 from grits_lab.report.outcome_ceiling import CEILING_OUTCOMES, repeatability
@@ -312,8 +312,7 @@ def _ceiling_cell(row: pd.Series, outcome: str) -> str:
 def write_comparison(table: pd.DataFrame, markdown: str, output_dir: str | Path) -> list[Path]:
     """COMPARISON_FILE and comparison.md in `output_dir` (created), written atomically. In an
     experiment's folder the page's `comparison` block renders the CSV (grits_lab/report/results_pages.py)."""
-    out = Path(output_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = ensure_writable_dir(output_dir)
     write_text_atomic(out / COMPARISON_FILE, table.to_csv(index=False))
     write_text_atomic(out / "comparison.md", markdown + "\n")
     return [out / COMPARISON_FILE, out / "comparison.md"]
