@@ -105,6 +105,36 @@ def ensure_writable_dir(path: str | Path) -> Path:
     return path
 
 
+def check_writable_dir(path: str | Path, named: str | Path | None = None) -> Path:
+    """Before the work: StorageError naming `path` unless files can be written there, tried in the
+    directory itself or, where it does not exist yet, in its nearest existing parent (a read-only
+    file system, no permission, a file where a directory belongs). Creates nothing. `named`: what
+    the message names instead of `path` (a file to be written there)."""
+    path = Path(path)
+    shown = path if named is None else named
+    existing = path.absolute()
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise StorageError(f"cannot write {shown}: {existing} is not a directory")
+    try:
+        with tempfile.NamedTemporaryFile(dir=existing, prefix=".write-check."):
+            pass
+    except OSError as exc:
+        raise StorageError(_describe(exc, Path(shown))) from None
+    return path
+
+
+def check_writable_file(path: str | Path) -> Path:
+    """Before the work: StorageError naming `path` unless a file can be written there
+    (`check_writable_dir` of its folder; a directory at `path` itself is refused too)."""
+    path = Path(path)
+    if path.is_dir():
+        raise StorageError(f"cannot write {path}: it is a directory")
+    check_writable_dir(path.parent, named=path)
+    return path
+
+
 def _ordinary_mode(path: Path) -> int:
     """The permission bits `open(path, "w")` would leave: the existing file's, else 0666 less the umask."""
     try:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 from typing import ClassVar, Literal, Optional
 
 import pytest
@@ -100,6 +101,19 @@ def test_two_spellings_of_one_number_are_one_key_given_twice(tmp_path):
         load_yaml(path)
     path.write_text('foods:\n  "on": {}\n  "yes": {}\n')
     assert load_yaml(path) == {"foods": {"on": {}, "yes": {}}}
+
+
+@pytest.mark.parametrize("text, message", [
+    ("inner:\n  ratio: .inf\n", "`inner.ratio` must be a finite number. Got inf."),
+    ("inner:\n  ratio: -.inf\n", "`inner.ratio` must be a finite number. Got -inf."),
+    ("inner:\n  ratio: .nan\n", "`inner.ratio` must be a finite number. Got nan."),
+    ("inner:\n  count: 1000000000000000000000\n", "`inner.count` must be a 64-bit integer (magnitude below 2**63)."),
+])
+def test_a_number_no_config_can_use_is_refused_on_load_naming_the_key(tmp_path, text, message):
+    path = tmp_path / "numbers.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=re.escape(f"{path}: {message}")):
+        load_config(path, OuterConfig)
 
 
 def test_merge_keys_may_be_overridden_and_equal_text_of_other_types_are_two_keys(tmp_path):

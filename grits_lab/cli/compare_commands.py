@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 from grits_lab.cli.flags import retire
@@ -66,8 +67,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _compare_runs(args: argparse.Namespace) -> int:
+    from grits_lab.io import check_writable_dir
     from grits_lab.report.run_compare import compare_run_dirs, write_comparison
 
+    if args.output_dir:
+        check_writable_dir(args.output_dir)  # before the comparison, not after it
     table, markdown = compare_run_dirs(args.before, args.after, ceiling=args.ceiling)
     print(markdown)
     if args.output_dir:
@@ -75,22 +79,43 @@ def _compare_runs(args: argparse.Namespace) -> int:
     return 0
 
 
+BRANCH_RUNS_FILE = "branch_runs.json"  # the run directories a --branches comparison folder was written from
+
+
+def _claim_branch_folder(out: Path, runs: list[Path]) -> list[str]:
+    """The resolved run directories of a --branches comparison; InputError when `out` already holds
+    the comparison of other runs of the same names (two studies' `draw0`, `draw1`): it is kept."""
+    from grits_lab.errors import InputError
+
+    listed = [str(p.resolve()) for p in runs]
+    record = out / BRANCH_RUNS_FILE
+    try:
+        earlier = json.loads(record.read_text()).get("runs") if record.is_file() else None
+    except (OSError, ValueError, AttributeError):
+        earlier = None  # unreadable: as a folder written before the record existed
+    if earlier is not None and earlier != listed:
+        raise InputError(f"{out} holds the comparison of the runs {', '.join(map(str, earlier))}, not of "
+                         f"{', '.join(listed)}; give another --output-dir to keep both")
+    return listed
+
+
 def _branches(args: argparse.Namespace, checkpoints: dict[str, Path], configs: list, label: str) -> int:
     """`compare-predictors --branches RUN...`: the comparison within states, the draws' spread and each guide's pick."""
-    from grits_lab.io import ensure_writable_dir, write_text_atomic
+    from grits_lab.io import ensure_writable_dir, write_json_atomic, write_text_atomic
     from grits_lab.report.branches import (SCOOP_ONLY_HORIZON, branch_markdown, branch_predictions, branch_runs, check_model_names,
                                            outcome_spread, selection)
     from grits_lab.spillage.compare import compare_predictions, comparison_markdown, write_comparison
 
     runs = branch_runs(args.branches, args.method)  # before any model runs
     check_model_names(list(checkpoints))
-    predictions = branch_predictions(checkpoints, args.branches, args.method, label)
     import yaml
 
     name = (yaml.safe_load((runs[0].path / "config.yaml").read_text()) or {}).get("run_id", runs[0].path.name)
     root = Path(args.output_dir or (configs[0].output_dir if configs else runs[0].path.parent))
     given = "+".join(r.path.name for r in runs)  # as --eval names its sets: another set of runs, another folder
     out = root / f"comparison_branches_{name}_plan{runs[0].plan}_{given}_{args.method}_{label}"
+    listed = _claim_branch_folder(out, [r.path for r in runs])
+    predictions = branch_predictions(checkpoints, args.branches, args.method, label)
     described = f"{args.method}'s chunks at plan {runs[0].plan} of {', '.join(args.branches)}"
     spread = outcome_spread(predictions)
     picked = selection(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed)
@@ -108,6 +133,7 @@ def _branches(args: argparse.Namespace, checkpoints: dict[str, Path], configs: l
         write_text_atomic(files[1], predictions.to_csv(index=False))
     write_text_atomic(files[0], text)
     write_text_atomic(out / "branch_selection.csv", picked.to_csv(index=False))
+    write_json_atomic(out / BRANCH_RUNS_FILE, {"runs": listed})
     print(text)
     print(f"written: {', '.join(str(f) for f in [*files, out / 'branch_selection.csv'])}")
     return 0
@@ -118,6 +144,7 @@ def _run(args: argparse.Namespace) -> int:
 
     from grits_lab.config import load_config
     from grits_lab.errors import InputError
+    from grits_lab.io import check_writable_dir
     from grits_lab.spillage.compare import compare_predictions, comparison_markdown, predict_all, write_comparison
     from grits_lab.spillage.predictor_config import PredictorConfig
     from grits_lab.spillage.predictor_training import run_dir
@@ -147,11 +174,12 @@ def _run(args: argparse.Namespace) -> int:
     label = args.label or configs[0].data.label
     if args.branches:
         return _branches(args, checkpoints, configs, label)
-    predictions = predict_all(checkpoints, args.eval, label=label)
-    comparison = compare_predictions(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed, n_bins=configs[0].train.ece_bins, label=label)
     out = Path(configs[0].output_dir) / f"comparison_{'+'.join(Path(d).name for d in args.eval)}"
     if label != "chunk":  # scored against another label: its own table, beside the chunk label's
         out = out.with_name(f"{out.name}_{label}")
+    check_writable_dir(out)  # before the predictions, not after them
+    predictions = predict_all(checkpoints, args.eval, label=label)
+    comparison = compare_predictions(predictions, list(checkpoints), n_resamples=args.bootstrap, seed=args.bootstrap_seed, n_bins=configs[0].train.ece_bins, label=label)
     files = write_comparison(comparison, ", ".join(args.eval), out)
     print(comparison_markdown(comparison, ", ".join(args.eval)))
     print(f"written: {', '.join(str(f) for f in files)}")

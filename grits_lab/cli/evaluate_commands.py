@@ -98,7 +98,7 @@ def _run(args: argparse.Namespace) -> int:
         raise ConfigError(f"{error} (the config merged with --override {', '.join(args.override)})") from error
     records = evaluate(config, progress=not args.no_progress, restart=args.restart)
     print(summary_table(records))
-    print(f"records: {config.output_dir}/episodes.parquet ({len(records)} episodes); tables and figures: grits-lab report {config.output_dir}")
+    print(f"records: {config.output_dir}/episodes.parquet ({len(records)} episodes); tables and figures: {report_hint(config.output_dir)}")
     # Episodes that raised are recorded (and skipped on resume) like any other; the exit status says so.
     failed = failed_episodes_line(records, f"{config.output_dir}/episodes.parquet")
     if failed:
@@ -132,3 +132,10 @@ def _replay(args: argparse.Namespace) -> int:
         if result.plan_figure:
             print(f"guidance picture: {result.plan_figure}")
     return 0 if result.matches else 1
+
+
+def report_hint(output_dir: str) -> str:
+    """The `grits-lab report` command for a run directory, quoted for a POSIX shell (spaces, `$`, quotes)."""
+    import shlex
+
+    return f"grits-lab report {shlex.quote(str(output_dir))}"

@@ -58,6 +58,10 @@ def _run(args: argparse.Namespace) -> int:
         if missing:
             raise InputError(f"--videos replays episodes from a `grits-lab evaluate` run directory; {run_dir} lacks {', '.join(missing)}")
         replay = replay_episode
+    if args.summary_to:
+        from grits_lab.io import check_writable_dir
+
+        check_writable_dir(args.summary_to)  # before the report, not after it
     result = build_report(args.run_dir, args.output_dir, also=args.also, videos=args.videos, replay=replay, progress=True,
                           real=args.real, methods=args.methods)
     print(f"report written to {result.out_dir} ({len(result.files)} files): {result.out_dir / 'report.html'}")

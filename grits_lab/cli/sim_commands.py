@@ -8,7 +8,6 @@ from pathlib import Path
 from typing import Any
 
 from grits_lab.cli.flags import retire
-from grits_lab.errors import InputError
 from grits_lab.io import to_json
 
 
@@ -51,9 +50,13 @@ def _rollout(args: argparse.Namespace) -> int:
     from grits_lab.sim.sim_config import SimConfig
     from grits_lab.sim.foods import level_count, load_foods
 
-    video = Path(args.video) if args.video else None
-    if video is not None and video.suffix.lower() not in (".gif", ".mp4", ".png"):
-        raise InputError(f"--video must end in .gif, .mp4 or .png, got {video.name!r}")
+    from grits_lab.sim.video import VIDEO_SUFFIXES, check_video_path
+
+    video = check_video_path(args.video, VIDEO_SUFFIXES + (".png",)) if args.video else None
+    if args.save_trajectory:
+        from grits_lab.io import check_writable_file
+
+        check_writable_file(args.save_trajectory)
     # Check the cheap things first so bad input fails fast, before the simulator starts.
     foods = load_foods(args.foods_file)
     food = foods.get(args.food)

@@ -3,7 +3,8 @@
 Every component config in grits_lab is a dataclass. `config_from_dict` walks its type hints so a
 misspelled key or a string where a number belongs fails on load with one line that names the
 dotted key, instead of surfacing as a confusing error deep inside a simulation or training run.
-Range checks live in each dataclass's `__post_init__` (use `require`).
+Range checks live in each dataclass's `__post_init__` (use `require`); before them, every float
+must be finite (`.inf` and `.nan` are refused) and every integer must fit 64 bits.
 
 A key that was renamed is refused by its new name: a dataclass declares `retired_keys:
 ClassVar[dict[str, str]] = {old: new}`, and a mapping that still says `old` fails with one line
@@ -15,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 import types
 import typing
 from pathlib import Path
@@ -25,6 +27,7 @@ import yaml
 from grits_lab.errors import ConfigError
 
 T = TypeVar("T")
+INT_LIMIT = 2**63  # every config integer lies in [-INT_LIMIT, INT_LIMIT)
 
 
 def require(condition: bool, key: str, value: Any, expectation: str) -> None:
@@ -198,10 +201,14 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"`{key}` must be an integer. Got {value!r}.")
+        if not -INT_LIMIT <= value < INT_LIMIT:  # records and Parquet columns hold 64-bit integers
+            raise ConfigError(f"`{key}` must be a 64-bit integer (magnitude below 2**63). Got {value!r}.")
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"`{key}` must be a number. Got {value!r}.")
+        if not math.isfinite(value):  # no config number means anything at inf or NaN
+            raise ConfigError(f"`{key}` must be a finite number. Got {value!r}.")
         return float(value)
     if tp is str:
         if not isinstance(value, str):

@@ -19,7 +19,8 @@ The class implements the controller protocol of grits_lab/policies/control.py (`
 `reset(scene)`, `plan(history, scene) -> Chunk | None`); each worker builds one instance per
 episode with `options` as keyword arguments. The class is imported when the config loads, so a
 misspelled module or class stops the command at once, naming `custom_methods.<name>.controller`.
-A config entry wins over an entry point of the same name; a built-in method's name, or a class
+Naming a file or module runs its code in the command and in every worker, as importing it does:
+name only code you trust. A config entry wins over an entry point of the same name; a built-in method's name, or a class
 inside grits_lab, is refused (the package's own methods are wired by name in methods.py).
 examples/torch_controller.py wraps a plain torch policy this way.
 
@@ -32,6 +33,7 @@ actions is the class's own business; `options` may not set them.
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import inspect
 import sys
@@ -82,6 +84,8 @@ def controller_class(method: str, spec: CustomMethodConfig) -> type:
         cls = getattr(_load_file(target), name) if target.endswith(".py") else EntryPoint(method, spec.controller, ENTRY_POINT_GROUP).load()
     except (ImportError, AttributeError, FileNotFoundError) as exc:
         raise ConfigError(f"`{key}`: cannot import {spec.controller!r} ({exc})") from None
+    except Exception as exc:  # the lab's module raised while it loaded: name it, in one line
+        raise ConfigError(f"`{key}`: importing {spec.controller!r} raised {type(exc).__name__}: {exc}") from None
     missing = [attr for attr in PROTOCOL if not hasattr(cls, attr)]
     if missing:
         raise ConfigError(f"`{key}`: {spec.controller} lacks {', '.join(missing)} of the controller protocol "
@@ -117,16 +121,23 @@ def build_custom_controller(method: str, spec: CustomMethodConfig, guidance: Gui
 
 
 def _load_file(path: str) -> Any:
-    """A module from a .py file, registered under a name made from its resolved path, so a
-    second load (another episode in the same worker) returns the same module."""
+    """A module from a .py file, registered under a name made from a digest of its resolved path
+    (two paths never share a module: `a_b/ctl.py` and `a/b_ctl.py` are two), so a second load
+    (another episode in the same worker) returns the same module. Loading runs the file's code,
+    as importing a module does; a file that raises while loading leaves no module behind."""
     resolved = Path(path).resolve()
     if not resolved.is_file():
         raise FileNotFoundError(f"no file {resolved}")
-    name = "grits_lab_custom_" + "_".join(resolved.with_suffix("").parts[1:]).replace("-", "_").replace(".", "_")
+    digest = hashlib.sha256(str(resolved).encode()).hexdigest()[:16]
+    name = f"grits_lab_custom_{''.join(c if c.isalnum() else '_' for c in resolved.stem)}_{digest}"
     if name in sys.modules:
         return sys.modules[name]
     loader = importlib.util.spec_from_file_location(name, resolved)
     module = importlib.util.module_from_spec(loader)
     sys.modules[name] = module
-    loader.loader.exec_module(module)
+    try:
+        loader.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[name]
+        raise
     return module

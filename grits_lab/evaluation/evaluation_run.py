@@ -333,10 +333,10 @@ def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], diges
 
 def evaluate(config: EvaluationConfig, *, progress: bool = True, restart: bool = False, executor: Executor | None = None) -> pd.DataFrame:
     """Run (or resume) the evaluation described by `config`; returns every record of the run directory."""
-    keys = episode_keys(config)
     paths = {m: method_checkpoints(m, config.checkpoints) for m in config.methods}
     for method in config.methods:
-        check_method_checkpoints(method, paths[method])
+        check_method_checkpoints(method, paths[method], config.guidance)
+    keys = episode_keys(config)
     digests = checkpoint_digests(paths)
     specs = build_specs(config, keys, paths=paths, digests=digests)
     if executor is None:

@@ -32,6 +32,10 @@ class EpisodeKey:
     split: str = "unseen"
 
 
+MAX_TRIALS = 10_000  # trials per food and level in one run: its episode list is built before the first episode
+MAX_TRIAL_INDEX = 2**31 - 1  # the last trial index a record may hold
+
+
 @dataclass
 class EpisodeGrid:
     """Foods x quantity levels x trials; episode seed = derive_seed(seed, food, level, trial).
@@ -55,8 +59,11 @@ class EpisodeGrid:
         require(len(self.foods) >= 1, "foods", self.foods, "a non-empty list")
         require(len(set(self.foods)) == len(self.foods), "foods", self.foods, "without repeats")
         require(len(set(self.levels)) == len(self.levels), "levels", self.levels, "without repeats")
-        require(self.trials >= 1, "trials", self.trials, "at least 1")
+        require(1 <= self.trials <= MAX_TRIALS, "trials", self.trials,
+                f"in [1, {MAX_TRIALS}] (per food and level; a larger protocol runs in parts, split by `first_trial`)")
         require(self.first_trial >= 0, "first_trial", self.first_trial, "non-negative")
+        require(self.first_trial <= MAX_TRIAL_INDEX - self.trials, "first_trial", self.first_trial,
+                f"in [0, {MAX_TRIAL_INDEX} - trials]")
         require(self.seed >= 0, "seed", self.seed, "non-negative")
 
     def keys(self, library: "FoodLibrary", key_prefix: str = "") -> list[EpisodeKey]:

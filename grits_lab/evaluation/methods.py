@@ -221,9 +221,11 @@ def build_controller(name: str, config: EvaluationConfig, paths: dict[str, str],
     )
 
 
-def check_method_checkpoints(name: str, paths: dict[str, str]) -> None:
-    """Before the first episode: each checkpoint of method `name` is the kind its key says, and a
-    predictor judges chunks as long as the policy executes (ConfigError naming the keys otherwise)."""
+def check_method_checkpoints(name: str, paths: dict[str, str], guidance: Any = None) -> None:
+    """Before the first episode: each checkpoint of method `name` is the kind its key says, a
+    predictor judges chunks as long as the policy executes, and `guidance.s` (when `guidance` is
+    given and the method is guided) lies on the policy's training-step scale, at most its
+    `num_train_timesteps` (ConfigError naming the keys otherwise)."""
     from grits_lab.config import config_from_dict
     from grits_lab.training import load_checkpoint
 
@@ -245,9 +247,14 @@ def check_method_checkpoints(name: str, paths: dict[str, str]) -> None:
                 from grits_lab.policies.diffusion import DiffusionPolicyConfig
 
                 try:
-                    n_action_steps = config_from_dict(DiffusionPolicyConfig, state["config"]).n_action_steps
+                    policy_config = config_from_dict(DiffusionPolicyConfig, state["config"])
                 except (ConfigError, KeyError, TypeError):
                     raise ConfigError(f"`checkpoints.policy` is not a diffusion policy checkpoint: {path}") from None
+                n_action_steps = policy_config.n_action_steps
+                steps = policy_config.scheduler.num_train_timesteps
+                if guidance is not None and name in GUIDED_METHODS and guidance.s > steps:
+                    raise ConfigError(f"`guidance.s` is {guidance.s}, but the policy of `checkpoints.policy` trained on "
+                                      f"{steps} timesteps: s is on that scale (steps with t <= s are guided), at most {steps}")
     spec = METHODS.get(name)
     if spec is None or spec.predictor is None:
         return

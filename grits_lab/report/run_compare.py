@@ -21,7 +21,7 @@ import pandas as pd
 
 from grits_lab.errors import InputError
 from grits_lab.intervals import sign_test_p
-from grits_lab.io import write_text_atomic
+from grits_lab.io import ensure_writable_dir, write_text_atomic
 from grits_lab.markdown import markdown_table
 from grits_lab.records import CPU_KERNELS
 from grits_lab.report.outcome_ceiling import CEILING_OUTCOMES, repeatability
@@ -129,6 +129,7 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame, *, ceiling: bool = F
             row[f"action_offset_draw_{side}"] = int(pairs[f"{DRAW_COLUMN}_{side}"].fillna(0).max()) if len(pairs) else 0
             labels = pairs[f"{CPU_KERNELS}_{side}"].dropna().astype(str)
             row[f"cpu_kernels_{side}"] = labels.mode().iloc[0] if len(labels) else ""
+            row[f"guidance_{side}"] = _guidance_setting(pairs, side)
         kb, ka = pairs[f"{CPU_KERNELS}_before"], pairs[f"{CPU_KERNELS}_after"]
         row["kernels_differ"] = int((kb.notna() & ka.notna() & (kb.astype(str) != ka.astype(str))).sum())
         for outcome in PAIRED_OUTCOMES:
@@ -258,6 +259,14 @@ def paired_section_title(table: pd.DataFrame) -> str:
             else f"Paired with {_method_name(table.iloc[0], 'reference')}")
 
 
+def _guidance_setting(pairs: pd.DataFrame, side: str) -> str:
+    """`rho 2.5, s 30` (each setting a side's paired episodes ran at, `; `-joined); empty without guidance."""
+    if f"rho_{side}" not in pairs.columns or f"s_{side}" not in pairs.columns:
+        return ""
+    settings = pairs[[f"rho_{side}", f"s_{side}"]].drop_duplicates()
+    return "; ".join(f"rho {rho:g}, s {int(s)}" for rho, s in settings.itertuples(index=False) if not pd.isna(rho))
+
+
 def comparison_markdown(table: pd.DataFrame) -> str:
     """The comparison (`compare_run_dirs`'s table, which names its runs) as a Markdown table with its caption."""
     before, after = str(table["before"].iloc[0]), str(table["after"].iloc[0])
@@ -278,6 +287,11 @@ def comparison_markdown(table: pd.DataFrame) -> str:
                  for side in ("before", "after")}
         lines[-1] += (f" Scoop actions offset (`scoop.action_offset`): {named['before']} in {before}, "
                       f"{named['after']} in {after}: the changes are what that offset did.")
+    if {"guidance_before", "guidance_after"} <= set(table.columns):
+        apart = table[table["guidance_before"].fillna("") != table["guidance_after"].fillna("")]
+        for _, row in apart.iterrows():  # paired by episode, not by setting: say so
+            lines[-1] += (f" {method_display(row['method'])} ran at {row['guidance_before'] or 'no guidance'} in {before} and at "
+                          f"{row['guidance_after'] or 'no guidance'} in {after}: the changes include what that setting did.")
     differ = int(table["kernels_differ"].sum()) if "kernels_differ" in table.columns else 0
     if differ:
         first = table[table["kernels_differ"] > 0].iloc[0]
@@ -312,8 +326,7 @@ def _ceiling_cell(row: pd.Series, outcome: str) -> str:
 def write_comparison(table: pd.DataFrame, markdown: str, output_dir: str | Path) -> list[Path]:
     """COMPARISON_FILE and comparison.md in `output_dir` (created), written atomically. In an
     experiment's folder the page's `comparison` block renders the CSV (grits_lab/report/results_pages.py)."""
-    out = Path(output_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = ensure_writable_dir(output_dir)
     write_text_atomic(out / COMPARISON_FILE, table.to_csv(index=False))
     write_text_atomic(out / "comparison.md", markdown + "\n")
     return [out / COMPARISON_FILE, out / "comparison.md"]

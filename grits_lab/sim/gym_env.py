@@ -69,6 +69,9 @@ WORKSPACE = (np.array([0.3, -0.3, 0.01]), np.array([0.8, 0.45, 0.4]))
 MAX_TILT_RAD = 1.2  # the spoon turns at most this far from its home orientation in relative mode
 
 
+RELATIVE_AXES = ("dx", "dy", "dz", "rx", "ry", "rz")  # the entries of a relative action
+
+
 class ScoopGymEnv(ScoopEnv, gym.Env):
     """The scooping task behind `gymnasium.Env`; see the module docstring for spaces and seeding.
 
@@ -120,10 +123,18 @@ class ScoopGymEnv(ScoopEnv, gym.Env):
 
     def relative_target(self, action: np.ndarray) -> np.ndarray:
         """The 9-D pose a relative action (6,) commands: the last commanded pose moved and turned
-        by the scaled action, clipped to WORKSPACE; a turn past MAX_TILT_RAD from home is dropped."""
-        a = np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
-        if a.shape != (6,):
-            raise ValueError(f"a relative action is 6 numbers in [-1, 1] (dx, dy, dz, rx, ry, rz), got shape {a.shape}")
+        by the scaled action, clipped to WORKSPACE; a turn past MAX_TILT_RAD from home is dropped.
+        Finite entries outside [-1, 1] are clipped to it (the action space's bounds); ValueError for
+        another shape or a NaN or infinite entry, naming the entry of the 6 sent."""
+        raw = np.asarray(action, dtype=np.float64).reshape(-1)
+        if raw.shape != (6,):
+            raise ValueError(f"a relative action is 6 numbers in [-1, 1] (dx, dy, dz, rx, ry, rz), got shape {raw.shape}")
+        bad = np.flatnonzero(~np.isfinite(raw))
+        if bad.size:
+            i = int(bad[0])
+            raise ValueError(f"a relative action is 6 finite numbers in [-1, 1] (dx, dy, dz, rx, ry, rz); entry {i} "
+                             f"({RELATIVE_AXES[i]}) is {raw[i]} in {raw.tolist()}")
+        a = np.clip(raw, -1.0, 1.0)
         current = self._pose_target
         target = current.copy()
         target[:3, 3] = np.clip(current[:3, 3] + RELATIVE_SCALE.translation_m * a[:3], *WORKSPACE)

@@ -47,11 +47,15 @@ def caption(frame: np.ndarray, lines: Sequence[str], height: int = 18) -> np.nda
 
 
 def check_video_path(path: str | Path, allowed: Sequence[str] = VIDEO_SUFFIXES) -> Path:
-    """`path` as a Path if it ends in one of `allowed` (case-insensitive); InputError otherwise."""
+    """`path` as a Path if it ends in one of `allowed` (case-insensitive) and a file can be written
+    there (grits_lab/io.py `check_writable_file`): InputError or StorageError otherwise, before any
+    frame is rendered."""
+    from grits_lab.io import check_writable_file
+
     path = Path(path)
     if path.suffix.lower() not in allowed:
         raise InputError(f"video file must end in {', '.join(allowed)}, got {path.name!r}")
-    return path
+    return check_writable_file(path)
 
 
 def write_video(path: str | Path, frames: Sequence[np.ndarray], fps: float = 10.0) -> Path:

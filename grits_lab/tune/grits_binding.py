@@ -110,5 +110,5 @@ def _check_against_evaluation(evaluation: EvaluationConfig, method: str) -> None
     gap = guidance_gap(method, evaluation)
     if gap is not None:
         raise ConfigError(f"`evaluation.method`: {method} {gap}")
-    check_method_checkpoints(method, method_checkpoints(method, evaluation.checkpoints))
+    check_method_checkpoints(method, method_checkpoints(method, evaluation.checkpoints))  # each trial's s: the study's `s` range
     check_reachable(cluster_address(evaluation.executor))

@@ -22,6 +22,7 @@ from optuna.trial import FrozenTrial, TrialState
 from grits_lab.io import save_parquet_atomic, write_json_atomic, write_text_atomic
 from grits_lab.tune.objective import summarize_records
 from grits_lab.tune.reference import REFERENCE_FILE, load_references, paired_line, reference_table
+from grits_lab.tune.storage import dashboard_command
 from grits_lab.tune.study_config import StudyConfig
 from grits_lab.tune.study import (
     ENQUEUED_ATTR, ERROR_ATTR, REQUEUED_ATTR, RETRY_OF_ATTR, WORKER_ATTR,
@@ -169,7 +170,7 @@ def write_outputs(study: optuna.Study, config: StudyConfig, out_dir: Path, stora
         "reference": {method: _reference_summary(records, paired[paired["reference"] == method] if len(paired) else paired,
                                                  {t.number for t in front}, best)
                       for method, records in references.items()},
-        "dashboard": f"optuna-dashboard {storage_description}",
+        "dashboard": dashboard_command(storage_description),
         "notes": [f"reference {m}: {why} (the next sweep command runs it before its first trial)"
                   for m, why in unstored.items()],
     }

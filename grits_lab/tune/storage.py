@@ -183,6 +183,10 @@ def _first_line(exc: object) -> str:
 
 
 def dashboard_command(storage_description: str) -> str:
-    """The shell command that opens this storage in optuna-dashboard (extra `dashboard`)."""
-    return f"optuna-dashboard {storage_description}"
+    """The shell command that opens this storage in optuna-dashboard (extra `dashboard`), the
+    storage quoted for a POSIX shell; it serves on 127.0.0.1 (docs/sweeps.md: reaching it from
+    another machine)."""
+    import shlex
+
+    return f"optuna-dashboard {shlex.quote(storage_description)}"
 

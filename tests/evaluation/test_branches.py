@@ -280,3 +280,24 @@ def test_a_nudged_replay_shares_the_state_and_the_sample_and_moves_only_from_the
     assert picked.loc["best_replays", "rate"] == pytest.approx(best["best_replays"])
     assert picked.loc["best_samples", "minus_replays"] == pytest.approx(best["best_samples"] - best["best_replays"])
     assert "best of 2 samples minus best of 2 replays" in (written / "branch_spread.md").read_text().lower()
+
+
+def test_a_second_study_whose_runs_have_the_same_names_does_not_overwrite_the_first_comparison(study, tmp_path, capsys):
+    import shutil
+
+    from grits_lab.cli import main
+
+    other = tmp_path / "other_study"
+    for name in ("draw0", "draw1"):
+        shutil.copytree(study[name], other / name)
+    first = [str(study["draw0"]), str(study["draw1"])]
+    assert main(["compare-predictors", "--branches", *first, "--bootstrap", "100", "--output-dir", str(tmp_path / "cmp")]) == 0
+    written = tmp_path / "cmp" / "comparison_branches_test_plan1_draw0+draw1_dp_horizon"
+    kept = (written / "branch_selection.csv").read_text()
+    capsys.readouterr()
+    second = [str(other / "draw0"), str(other / "draw1")]
+    assert main(["compare-predictors", "--branches", *second, "--bootstrap", "100", "--output-dir", str(tmp_path / "cmp")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{written} holds the comparison of the runs {study['draw0'].resolve()}" in err[0], err
+    assert (written / "branch_selection.csv").read_text() == kept
+    assert main(["compare-predictors", "--branches", *first, "--bootstrap", "100", "--output-dir", str(tmp_path / "cmp")]) == 0  # the same runs again

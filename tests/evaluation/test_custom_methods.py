@@ -153,3 +153,26 @@ def test_replay_gives_a_guided_controller_the_records_rho_and_s(tmp_path):
     (tmp_path / "config.yaml").write_text(yaml.safe_dump(tiny_config(tmp_path, methods=["torch_mlp_guided"], custom_methods=GUIDED)))
     config = load_run_config(tmp_path, {"method": "torch_mlp_guided", "rho": 0.75, "s": 5})
     assert (config.guidance.rho, config.guidance.s) == (0.75, 5)
+
+
+def test_two_controller_files_whose_paths_differ_only_by_slash_or_underscore_are_two_classes(tmp_path):
+    from grits_lab.evaluation.custom_methods import CustomMethodConfig, controller_class
+
+    files = {"first": tmp_path / "a_b" / "ctl.py", "second": tmp_path / "a" / "b_ctl.py"}
+    for method, path in files.items():
+        path.parent.mkdir(parents=True)
+        path.write_text(f"class Ctl:\n    cloud_steps = 0\n    which = {method!r}\n"
+                        "    def reset(self, scene): pass\n    def plan(self, history, scene): return None\n")
+    classes = {m: controller_class(m, CustomMethodConfig(f"{p}:Ctl")) for m, p in files.items()}
+    assert classes["first"].which == "first" and classes["second"].which == "second"
+
+
+def test_a_controller_file_that_raises_while_loading_is_refused_and_loaded_afresh_once_fixed(tmp_path):
+    from grits_lab.evaluation.custom_methods import CustomMethodConfig, controller_class
+
+    path = tmp_path / "ctl.py"
+    path.write_text("import not_a_module_anywhere\n")
+    with pytest.raises(ConfigError, match=r"`custom_methods.mine.controller`: cannot import"):
+        controller_class("mine", CustomMethodConfig(f"{path}:Ctl"))
+    path.write_text("class Ctl:\n    cloud_steps = 0\n    def reset(self, scene): pass\n    def plan(self, history, scene): return None\n")
+    assert controller_class("mine", CustomMethodConfig(f"{path}:Ctl")).cloud_steps == 0

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 from tests.evaluation.eval_helpers import eval_config
 
@@ -135,14 +137,44 @@ def test_provenance_reads_a_planted_checkpoint_without_running_it(models, tmp_pa
     assert not marker.exists()
 
 
-def _evaluate_refused(config, tmp_path, capsys) -> list[str]:
-    """`grits-lab evaluate` of `config` written to a file: asserts exit 2 and returns the lines of stderr."""
+def _evaluate_refused(config, tmp_path, capsys, changes: dict | None = None) -> list[str]:
+    """`grits-lab evaluate` of `config` (with `changes` merged into its mapping) written to a file:
+    asserts exit 2 and returns the lines of stderr."""
     import yaml
 
     from grits_lab.cli import main
-    from grits_lab.config import config_to_dict
+    from grits_lab.config import config_to_dict, merge_mappings
 
     path = tmp_path / "evaluate.yaml"
-    path.write_text(yaml.safe_dump(config_to_dict(config)))
+    path.write_text(yaml.safe_dump(merge_mappings(config_to_dict(config), changes or {})))
     assert main(["evaluate", str(path), "--serial", "--no-progress"]) == 2
     return capsys.readouterr().err.strip().splitlines()
+
+
+@pytest.mark.parametrize("changes, refusal", [
+    ({"trials": 10**9}, "`trials` must be in [1, 10000]"),
+    ({"first_trial": 10**21}, "`first_trial` must be a 64-bit integer"),
+    ({"first_trial": 2**31 - 1}, "`first_trial` must be in [0, 2147483647 - trials]"),
+    ({"guidance": {"rho": math.inf}}, "`guidance.rho` must be a finite number. Got inf."),
+    ({"guidance": {"rho": math.nan}}, "`guidance.rho` must be a finite number. Got nan."),
+    ({"guidance": {"s": 1000000}}, "`guidance.s` is 1000000, but the policy of `checkpoints.policy` trained on 100 timesteps"),
+    ({"guidance": {"grad_clip": math.inf}}, "`guidance.grad_clip` must be a finite number"),
+    ({"posthoc": {"rho": math.inf}}, "`posthoc.rho` must be a finite number"),
+    ({"transfer": {"clearance": math.inf}}, "`transfer.clearance` must be a finite number"),
+])
+def test_a_number_the_run_cannot_use_is_refused_in_one_line_before_any_directory_or_episode(models, tmp_path, capsys, changes, refusal):
+    err = _evaluate_refused(eval_config(models, tmp_path / "run", methods=["grits"]), tmp_path, capsys, changes)
+    assert len(err) == 1 and refusal in err[0], err
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_missing_checkpoint_is_reported_before_the_episode_list_is_built(models, tmp_path, capsys, monkeypatch):
+    from grits_lab.evaluation import evaluation_run
+
+    def no_episode_list(config):
+        raise AssertionError("the episode list was built before the checkpoints were checked")
+
+    monkeypatch.setattr(evaluation_run, "episode_keys", no_episode_list)
+    config = eval_config(models, tmp_path / "run", methods=["dp"], checkpoints={"policy": str(tmp_path / "absent.pt")})
+    err = _evaluate_refused(config, tmp_path, capsys)
+    assert len(err) == 1 and f"`checkpoints.policy` not found: {tmp_path / 'absent.pt'}" in err[0], err

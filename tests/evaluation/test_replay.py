@@ -238,3 +238,20 @@ def test_a_diverged_replay_names_the_cpu_kernels_of_record_and_replay(run, tmp_p
     assert f"recorded on CPU kernels `{elsewhere}`, replayed on `{recorded}`" in other.describe()
     older = replay_episode(run_copy(run_dir, tmp_path / "older", frame.drop(columns=["cpu_kernels"])), **episode(records, "dp"))
     assert "the record does not name its CPU kernels" in older.describe() and "cpu_kernels" not in older.unrecorded
+
+
+def test_a_video_destination_that_cannot_be_written_is_refused_before_the_replay(run, tmp_path, capsys, monkeypatch):
+    from grits_lab.sim import env as sim_env
+
+    run_dir, records = run
+    e = episode(records, "dp")
+    (tmp_path / "a_file").write_text("")
+    target = tmp_path / "a_file" / "dp.gif"
+
+    def no_world(*args, **kwargs):
+        raise AssertionError("the world was built before the destination was checked")
+
+    monkeypatch.setattr(sim_env, "ScoopEnv", no_world)
+    code = main(["replay", str(run_dir), "--method", "dp", "--food", e["food"], "--level", e["level"], "--trial", "0", "--video", str(target)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and f"cannot write {target}: {tmp_path / 'a_file'} is not a directory" in err[0], err

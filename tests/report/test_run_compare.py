@@ -273,3 +273,24 @@ def test_a_declared_ceiling_pairs_runs_whose_records_do_not_name_their_differenc
     assert "compared as two draws of one chance (`--ceiling`)" in out
     assert "| Diffusion Policy | spill during the scoop | 75% | 1/2 |" in out and "Changed by the difference between the runs" in out
     assert bool(pd.read_csv(tmp_path / "cmp" / "comparison.csv")["ceiling_declared"].iloc[0])
+
+
+def test_an_output_dir_that_cannot_be_written_is_refused_in_one_line_before_the_comparison(tmp_path, capsys):
+    _run([("success", 40, 0)], tmp_path, "before")
+    _run([("spill", 40, 0)], tmp_path, "after")
+    (tmp_path / "a_file").write_text("")
+    assert main(["compare-runs", str(tmp_path / "before"), str(tmp_path / "after"), "--output-dir", str(tmp_path / "a_file" / "cmp")]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and f"cannot write {tmp_path / 'a_file' / 'cmp'}: {tmp_path / 'a_file'} is not a directory" in err[0], err
+    assert "Diffusion Policy" not in captured.out  # refused before the comparison was made
+
+
+def test_runs_whose_guidance_settings_differ_are_paired_by_episode_and_the_caption_says_so(tmp_path, capsys):
+    for name, (rho, s) in {"before": (2.5, 30), "after": (1.0, 24)}.items():
+        frame = _run([("success", 40, 0), ("spill", 40, 0)], tmp_path, name)
+        frame["method"], frame["rho"], frame["s"] = "grits", rho, s
+        frame.to_parquet(tmp_path / name / "episodes.parquet")
+    assert main(["compare-runs", str(tmp_path / "before"), str(tmp_path / "after")]) == 0
+    out = capsys.readouterr().out
+    assert "GRITS ran at rho 2.5, s 30 in before and at rho 1, s 24 in after: the changes include what that setting did." in out

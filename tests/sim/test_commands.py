@@ -125,3 +125,11 @@ def test_every_food_meets_its_fill_band(capsys):
     assert code == 0
     for food in json.loads(out)["foods"]:
         _check_level_bands(food)
+
+
+@pytest.mark.parametrize("flag", ["--video", "--save-trajectory"])
+def test_a_destination_that_cannot_be_written_is_refused_before_the_simulator_starts(capsys, tmp_path, flag):
+    (tmp_path / "a_file").write_text("")
+    target = tmp_path / "a_file" / ("out.gif" if flag == "--video" else "played.npy")
+    code, _, err = run(capsys, "rollout", "--food", "orange", "--level", "medium", "--episode-seed", "2", "--expert", flag, str(target))
+    assert_one_line_error(code, err, str(target), "is not a directory")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import gymnasium
@@ -228,3 +229,14 @@ def test_the_vector_env_example_steps_two_envs_without_an_ik_failure():
     result = example["run"](n_envs=2, steps=5, food=FOOD, level=LEVEL)
     assert result["spilled"].shape == result["scooped"].shape == (2,)
     assert list(result["ik_failures"]) == [0, 0]
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_a_relative_action_that_is_not_finite_is_refused_naming_the_six_numbers_sent(bad):
+    env = make().unwrapped
+    env.reset(seed=0)
+    action = np.zeros(6, np.float32)
+    action[2] = bad
+    with pytest.raises(ValueError, match=r"a relative action is 6 finite numbers .*\(dx, dy, dz, rx, ry, rz\); entry 2 \(dz\) is "):
+        env.step(action)
+    env.close()

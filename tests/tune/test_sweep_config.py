@@ -33,6 +33,9 @@ def test_repository_sweep_files_load(name):
         ({"evaluator": "grits"}, "evaluation.config"),
         ({"study_name": "a b/c"}, "study_name"),
         ({"rho": {"low": 0.5, "high": 8.0, "lg": True}}, "rho.lg"),
+        ({"validation": {"trials": 10**9}}, "validation.trials"),
+        ({"validation": {"first_trial": 10**21}}, "validation.first_trial"),
+        ({"rho": {"low": 0.5, "high": float("inf"), "log": True}}, "rho.high"),
     ],
 )
 def test_invalid_sweep_files_are_rejected_naming_the_key(sweep_file, overrides, key):
