@@ -20,6 +20,16 @@ from pathlib import Path
 
 PROTOCOL_VERSION = 12
 PROTOCOL = f"scoop-v{PROTOCOL_VERSION}"
+# The Gymnasium env's own version (grits_lab.sim.ENV_ID, "grits_lab/Scoop-v<N>"): it names the scoop
+# env alone (the world, foods and levels, physics, its spaces), not the stages after the scoop, so it
+# bumps only when the env changes. It is 12 because the id followed the protocol until scoop-v12.
+ENV_VERSION = 12
+
+# What each version names, as a fingerprint per version (docs/protocol.md, "When to bump"):
+# tests/test_versions.py recomputes the current ones and fails when what a version names changed
+# without a bump, or a version was bumped while what it names stayed the same.
+ENV_FINGERPRINTS = {12: "8c16d69d9cb380cc"}
+PROTOCOL_FINGERPRINTS = {12: "17c5525a2c9ebaab"}
 
 PACKAGES = ("grits-lab", "numpy", "pandas", "pyarrow", "matplotlib", "jinja2", "torch", "pybullet", "ray", "optuna", "open3d-cpu", "open3d")
 

@@ -133,8 +133,12 @@ def test_a_reference_page_holds_no_measurements(page):
                        "to its studies/<name>/README.md, and link there")
 
 
+# docs/cli.md is generated from the parser (tests/cli checks it is current): a reference looked up, not read.
+GENERATED_PAGES = {"cli.md"}
+
+
 def test_the_user_guide_is_read_in_one_sitting():
-    words = {p.name: len(p.read_text().split()) for p in DOCS.glob("*.md")}
+    words = {p.name: len(p.read_text().split()) for p in DOCS.glob("*.md") if p.name not in GENERATED_PAGES}
     assert sum(words.values()) <= GUIDE_WORDS, (
         f"docs/*.md hold {sum(words.values())} words, more than {GUIDE_WORDS}: "
         + ", ".join(f"{name} {n}" for name, n in sorted(words.items(), key=lambda item: -item[1])[:5]))

@@ -1,4 +1,5 @@
-"""The package's layering: every import in grits_lab points down, and none goes through a string.
+"""The package's layering: every import in grits_lab points down, none goes through a string, and the
+framework never imports a study (the top-level `studies` package beside it).
 
 Read from the source (every `import` statement, module level or inside a function), so the rule
 holds for the lazy imports the CLI's handlers make too. A package may import itself and any
@@ -40,8 +41,8 @@ def _part(module: Path) -> str:
     return rel.parts[0].removesuffix(".py")
 
 
-def _imports(path: Path) -> list[tuple[int, str]]:
-    """(line, dotted module) of every grits_lab import in the file, relative imports resolved."""
+def _imports(path: Path, top: str = "grits_lab") -> list[tuple[int, str]]:
+    """(line, dotted module) of every import of package `top` in the file, relative imports resolved."""
     tree = ast.parse(path.read_text(), filename=str(path))
     here = ["grits_lab", *path.relative_to(ROOT).with_suffix("").parts]
     package = here[:-1]  # the package holding the file (an __init__'s own package)
@@ -57,8 +58,14 @@ def _imports(path: Path) -> list[tuple[int, str]]:
             names = [alias.name for alias in node.names]
         else:
             continue
-        found += [(node.lineno, n) for n in names if n == "grits_lab" or n.startswith("grits_lab.")]
+        found += [(node.lineno, n) for n in names if n == top or n.startswith(top + ".")]
     return found
+
+
+def _study_imports() -> list[str]:
+    """`file:line imports MODULE` for every import of `studies` in the framework."""
+    return [f"{path.relative_to(ROOT)}:{line} imports {module}" for path in sorted(ROOT.rglob("*.py"))
+            for line, module in _imports(path, "studies")]
 
 
 def _violations() -> list[str]:
@@ -85,6 +92,26 @@ def test_every_import_points_down_the_layers():
     assert _violations() == []
 
 
+def test_the_framework_never_imports_a_study():
+    assert _study_imports() == []
+
+
+def _fake_package(tmp_path: Path, monkeypatch, package: str, files: dict[str, str]) -> None:
+    """A grits_lab tree under `tmp_path` holding `files` in `package`, which the checkers read instead."""
+    fake = tmp_path / "grits_lab"
+    (fake / package).mkdir(parents=True)
+    for name, text in files.items():
+        (fake / package / name).write_text(text)
+    monkeypatch.setattr(__import__(__name__, fromlist=["ROOT"]), "ROOT", fake)
+
+
+def test_the_checker_sees_a_study_import(tmp_path, monkeypatch):
+    """The rule is not vacuous: a report module importing a study, even lazily, is reported."""
+    _fake_package(tmp_path, monkeypatch, "report", {"leak.py": "def f():\n    from studies.outcome_sensitivity import hooks\n",
+                                                    "fine.py": "from grits_lab.report import tables\nimport studious\n"})
+    assert _study_imports() == ["report/leak.py:2 imports studies.outcome_sensitivity"]
+
+
 def test_no_package_reaches_another_through_importlib_or_a_module_path_string():
     offenders = []
     for path in sorted(ROOT.rglob("*.py")):
@@ -93,7 +120,7 @@ def test_no_package_reaches_another_through_importlib_or_a_module_path_string():
             offenders.append(str(path.relative_to(ROOT)))
         tree = ast.parse(text)
         for node in ast.walk(tree):
-            if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value.startswith("grits_lab.") \
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value.startswith(("grits_lab.", "studies.")) \
                     and ":" in node.value:
                 offenders.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.value!r}")
     assert offenders == []
@@ -101,11 +128,8 @@ def test_no_package_reaches_another_through_importlib_or_a_module_path_string():
 
 def test_the_checker_sees_an_upward_import(tmp_path, monkeypatch):
     """The rule is not vacuous: a data module importing evaluation is reported."""
-    fake = tmp_path / "grits_lab"
-    (fake / "data").mkdir(parents=True)
-    (fake / "data" / "leak.py").write_text("def f():\n    from grits_lab.evaluation.evaluation_run import evaluate\n")
-    (fake / "data" / "fine.py").write_text("from ..sim import foods\nfrom . import format\n")
-    monkeypatch.setattr(__import__(__name__, fromlist=["ROOT"]), "ROOT", fake)
+    _fake_package(tmp_path, monkeypatch, "data", {"leak.py": "def f():\n    from grits_lab.evaluation.evaluation_run import evaluate\n",
+                                                  "fine.py": "from ..sim import foods\nfrom . import format\n"})
     assert _violations() == ["data/leak.py:2: data (layer 7) imports grits_lab.evaluation.evaluation_run (layer 10)"]
 
 

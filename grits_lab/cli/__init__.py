@@ -60,7 +60,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    return run_command(build_parser(), argv)
+
+
+def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) -> int:
+    """Parse `argv` with `parser` and run the chosen handler (`handler` default): a GritsError is one
+    line and exit code 2, an interrupt exit code 130. Also the entry of a study's `__main__`."""
     try:
         args = parser.parse_args(argv)
     except GritsError as exc:  # a retired flag (grits_lab/cli/flags.py)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from grits_lab.cli.flags import retire
+from grits_lab.cli.flags import NO_PROGRESS_HELP, retire
 from grits_lab.io import to_json
 
 
@@ -22,7 +22,7 @@ def register(subparsers: Any) -> None:
     collect.add_argument("--workers", type=int, help="number of parallel workers (overrides executor.workers)")
     collect.add_argument("--address", help="Ray cluster address (overrides executor.address and RAY_ADDRESS)")
     collect.add_argument("--serial", action="store_true", help="run in this process, without Ray")
-    collect.add_argument("--no-progress", action="store_true", help="no progress bar (logs, CI)")
+    collect.add_argument("--no-progress", action="store_true", help=NO_PROGRESS_HELP)
     retire(collect, "--output", "--output-dir")
     retire(collect, "--seed", "--root-seed")
     collect.set_defaults(handler=_collect)

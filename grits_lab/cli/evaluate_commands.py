@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
-from grits_lab.cli.flags import retire
+from grits_lab.cli.flags import NO_PROGRESS_HELP, retire
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -21,23 +22,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "failed (its error is kept in the records), 2 for bad input."
         ),
     )
-    parser.add_argument("config", help="evaluation config, e.g. experiments/evaluate_quick.yaml")
-    parser.add_argument("--override", metavar="YAML", action="append", default=None,
-                        help="YAML merged over the config (any of its keys), e.g. a sweep's best.yaml with `guidance: {rho: ..., s: ...}`; "
-                             "repeat it to merge several, in order, mappings key by key")
-    parser.add_argument("--methods", nargs="+", default=None, help="evaluate only these methods (default: the config's)")
-    parser.add_argument("--output-dir", metavar="DIR", default=None, help="run directory (overrides the config's output_dir)")
-    parser.add_argument("--address", help="Ray cluster address (overrides executor.address and RAY_ADDRESS)")
-    parser.add_argument("--branch-draw", type=int, metavar="N", default=None,
-                        help="scoop.branch_draw: another sample of the policy at the config's scoop.branch_plan, from "
-                             "the same state (docs/evaluation.md, \"Branches from one state\"); give each draw its own --output-dir")
-    parser.add_argument("--action-offset-draw", type=int, metavar="N", default=None,
-                        help="scoop.action_offset_draw: another independent set of the nudge's seeded directions, with a "
-                             "config or --override that sets scoop.action_offset (docs/evaluation.md, \"Outcome sensitivity\")")
-    parser.add_argument("--serial", action="store_true", help="run in this process instead of on Ray")
-    parser.add_argument("--restart", action="store_true", help="discard the run directory's records and start over")
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_evaluation_arguments(parser)
     retire(parser, "--fresh", "--restart")
+    retire(parser, "--branch-draw", "`python -m studies.outcome_sensitivity branch CONFIG --plan K --draw N`")
+    retire(parser, "--action-offset-draw", "`python -m studies.outcome_sensitivity nudge CONFIG --offset M --draw N`")
     parser.set_defaults(handler=_run)
 
     replay = subparsers.add_parser(
@@ -64,9 +52,35 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     replay.set_defaults(handler=_replay)
 
 
+def add_evaluation_arguments(parser: argparse.ArgumentParser) -> None:
+    """The arguments of `grits-lab evaluate` (the config, --override, --methods, --checkpoint, --output-dir,
+    --address, --serial, --restart, --no-progress), for a command that runs an evaluation with a
+    scoop hook (a study's `__main__`); `run_evaluation` reads them."""
+    parser.add_argument("config", help="evaluation config, e.g. experiments/evaluate_quick.yaml")
+    parser.add_argument("--override", metavar="YAML", action="append", default=None,
+                        help="YAML merged over the config (any of its keys), e.g. a sweep's best.yaml with `guidance: {rho: ..., s: ...}`; "
+                             "repeat it to merge several, in order, mappings key by key")
+    parser.add_argument("--methods", nargs="+", default=None, help="evaluate only these methods (default: the config's)")
+    parser.add_argument("--checkpoint", metavar="KEY=PATH", action="append", default=None,
+                        help="a trained model the methods load, e.g. policy=results/policy_cpu/checkpoints/last.pt "
+                             "(overrides checkpoints.KEY; keys: policy, predictor, predictor_raw, predictor_pointnet2, "
+                             "predictor_horizon, bc, demos); repeat it for several")
+    parser.add_argument("--output-dir", metavar="DIR", default=None, help="run directory (overrides the config's output_dir)")
+    parser.add_argument("--address", help="Ray cluster address (overrides executor.address and RAY_ADDRESS)")
+    parser.add_argument("--serial", action="store_true", help="run in this process instead of on Ray")
+    parser.add_argument("--restart", action="store_true", help="discard the run directory's records and start over")
+    parser.add_argument("--no-progress", action="store_true", help=NO_PROGRESS_HELP)
+
+
 def _run(args: argparse.Namespace) -> int:
+    return run_evaluation(args)
+
+
+def run_evaluation(args: argparse.Namespace, hook: Any = None) -> int:
+    """`grits-lab evaluate` with the arguments of `add_evaluation_arguments`, every episode's scoop
+    hooked by `hook` (a `ScoopHook`; None: none). Returns the exit status."""
     from grits_lab.config import load_yaml, merge_mappings
-    from grits_lab.errors import ConfigError
+    from grits_lab.errors import ConfigError, InputError
     from grits_lab.evaluation.evaluation_config import load_evaluation_config
     from grits_lab.evaluation.evaluation_run import evaluate, failed_episodes_line, summary_table
 
@@ -80,23 +94,24 @@ def _run(args: argparse.Namespace) -> int:
     # one error naming it); the command-line flags below win over the file.
     if args.methods:
         overrides["methods"] = list(args.methods)
+    for given in args.checkpoint or []:
+        key, sep, path = given.partition("=")
+        if not sep or not key or not path:
+            raise InputError(f"--checkpoint takes KEY=PATH, e.g. policy=results/policy_cpu/checkpoints/last.pt; got {given!r}")
+        overrides["checkpoints"] = {**overrides.get("checkpoints", {}), key: path}  # an unknown key fails at load, named
     if args.output_dir:
         overrides["output_dir"] = args.output_dir
     if args.address:
         overrides["executor"] = {**overrides.get("executor", {}), "address": args.address}
     if args.serial:
         overrides["executor"] = {**overrides.get("executor", {}), "backend": "serial"}
-    if args.branch_draw is not None:
-        overrides["scoop"] = {**overrides.get("scoop", {}), "branch_draw": args.branch_draw}
-    if args.action_offset_draw is not None:
-        overrides["scoop"] = {**overrides.get("scoop", {}), "action_offset_draw": args.action_offset_draw}
     try:
         config = load_evaluation_config(args.config, overrides)
     except ConfigError as error:
         if not args.override:
             raise
         raise ConfigError(f"{error} (the config merged with --override {', '.join(args.override)})") from error
-    records = evaluate(config, progress=not args.no_progress, restart=args.restart)
+    records = evaluate(config, progress=not args.no_progress, restart=args.restart, hook=hook)
     print(summary_table(records))
     print(f"records: {config.output_dir}/episodes.parquet ({len(records)} episodes); tables and figures: {report_hint(config.output_dir)}")
     # Episodes that raised are recorded (and skipped on resume) like any other; the exit status says so.

@@ -6,8 +6,14 @@
 - `--address`: the Ray cluster to run on (overrides the config's `executor.address` and
   RAY_ADDRESS). Every command that runs on Ray has it.
 - `--restart`: discard what an earlier run of the same command left (records, checkpoints) and
-  start over. `grits-lab pipeline --force STAGE` means something else: run the stage even though
+  start over. `grits-lab pipeline --rerun STAGE` means something else: run the stage even though
   it is up to date, and the stage resumes its outputs like any rerun (nothing is discarded).
+- `--no-progress`: no progress bars or per-epoch lines (logs, CI).
+- `--video FILE`: write a video file (replay, rollout); `report --video-episodes N` films N episodes.
+- `--held-out DATASET`: the held-out spillage dataset a predictor is scored on (train predictor,
+  compare-predictors); `--dataset` is always training data.
+- `--checkpoint KEY=PATH` (evaluate): a trained model a method loads, instead of a placeholder
+  override file; `--checkpoint best|last` (train predictor, compare-predictors) picks a run's own.
 - Seeds, one name per meaning: `--root-seed` (collect: the seed every episode's seed is derived
   from), `--episode-seed` (rollout, scene: one episode's world), `--bowl-seed` (foods: the
   settled bowl whose fill height is measured), `--bootstrap-seed` (compare-predictors).
@@ -24,6 +30,9 @@ from collections.abc import Sequence
 from typing import Any
 
 from grits_lab.errors import InputError
+
+
+NO_PROGRESS_HELP = "no progress bars or per-epoch lines (logs, CI)"
 
 
 class RetiredFlag(argparse.Action):

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from grits_lab.cli.flags import NO_PROGRESS_HELP, retire
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -16,9 +18,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("config", help="pipeline config, e.g. experiments/quickstart.yaml")
     parser.add_argument("--only", nargs="+", metavar="STAGE", help="run only these stages")
-    parser.add_argument("--force", nargs="+", metavar="STAGE", default=[], help="run these stages even if up to date; each resumes its outputs (nothing is discarded)")
+    parser.add_argument("--rerun", nargs="+", metavar="STAGE", default=[], help="run these stages even if up to date; each resumes its outputs (nothing is discarded)")
     parser.add_argument("--address", help="Ray cluster address for collection and evaluation (overrides `address` in the config and RAY_ADDRESS)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    parser.add_argument("--no-progress", action="store_true", help=NO_PROGRESS_HELP)
+    retire(parser, "--force", "--rerun")
     parser.set_defaults(handler=_run)
 
 
@@ -30,10 +33,10 @@ def _run(args: argparse.Namespace) -> int:
     config = load_pipeline_config(args.config)
     if args.address:
         config.address = args.address
-    for name in (args.only or []) + list(args.force):
+    for name in (args.only or []) + list(args.rerun):
         if name not in config.stages:
             raise InputError(f"unknown stage `{name}`; this pipeline has: {', '.join(config.ordered_stages())}")
-    results = run_pipeline(config, only=args.only, force=args.force, progress=not args.no_progress)
+    results = run_pipeline(config, only=args.only, force=args.rerun, progress=not args.no_progress)
     print(f"\npipeline {config.name}: outputs in {config.output_dir}")
     for stage, result in results.items():
         seconds = result.get("seconds")

@@ -1,4 +1,4 @@
-"""`grits-lab report RUN_DIR [OTHER_RUN ...] [--output-dir DIR] [--methods METHOD ...] [--summary-to DIR] [--videos N]`: the paper's tables and figures from a run's records, optionally with replayed episodes."""
+"""`grits-lab report RUN_DIR [OTHER_RUN ...] [--output-dir DIR] [--methods METHOD ...] [--summary-to DIR] [--video-episodes N]`: the paper's tables and figures from a run's records, optionally with replayed episodes."""
 
 from __future__ import annotations
 
@@ -33,9 +33,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="also write the experiment's committed summary into DIR (summary.csv, stage_cause.csv, claims.csv, "
                              "provenance.json, config.yaml; grits_lab/report/summary.py), e.g. studies/STUDY/summaries/NAME; "
                              "then `grits-lab results render`")
-    parser.add_argument("--videos", metavar="N", type=int, default=0,
+    parser.add_argument("--video-episodes", metavar="N", type=int, default=0,
                         help="replay up to N episodes per food under Diffusion Policy and GRITS (same seed) and show the videos "
                              "side by side (needs the run's checkpoints; RUN_DIR must be a `grits-lab evaluate` run directory)")
+    retire(parser, "--videos", "--video-episodes")
     parser.set_defaults(handler=_run)
 
 
@@ -46,23 +47,23 @@ def _run(args: argparse.Namespace) -> int:
     from grits_lab.report.build import build_report
 
     replay = None
-    if args.videos < 0:
-        raise InputError(f"--videos must be 0 or more. Got {args.videos}.")
-    if args.videos and args.also:
-        raise InputError("--videos replays episodes of one run directory; give RUN_DIR alone")
-    if args.videos:
+    if args.video_episodes < 0:
+        raise InputError(f"--video-episodes must be 0 or more. Got {args.video_episodes}.")
+    if args.video_episodes and args.also:
+        raise InputError("--video-episodes replays episodes of one run directory; give RUN_DIR alone")
+    if args.video_episodes:
         from grits_lab.report.replay import replay_episode
 
         run_dir = Path(args.run_dir)
         missing = [name for name in ("episodes.parquet", "config.yaml") if not (run_dir / name).is_file()]
         if missing:
-            raise InputError(f"--videos replays episodes from a `grits-lab evaluate` run directory; {run_dir} lacks {', '.join(missing)}")
+            raise InputError(f"--video-episodes replays episodes from a `grits-lab evaluate` run directory; {run_dir} lacks {', '.join(missing)}")
         replay = replay_episode
     if args.summary_to:
         from grits_lab.io import check_writable_dir
 
         check_writable_dir(args.summary_to)  # before the report, not after it
-    result = build_report(args.run_dir, args.output_dir, also=args.also, videos=args.videos, replay=replay, progress=True,
+    result = build_report(args.run_dir, args.output_dir, also=args.also, videos=args.video_episodes, replay=replay, progress=True,
                           real=args.real, methods=args.methods)
     print(f"report written to {result.out_dir} ({len(result.files)} files): {result.out_dir / 'report.html'}")
     for note in result.missing:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from grits_lab.cli.flags import NO_PROGRESS_HELP
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -25,7 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--report-only", action="store_true",
                         help="run no trial; rewrite the tables, best.yaml, the front/ overrides and plots from the storage")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar (one line per trial)")
+    parser.add_argument("--no-progress", action="store_true", help=NO_PROGRESS_HELP)
     parser.set_defaults(handler=_run)
 
 

@@ -1,6 +1,6 @@
 """`grits-lab train policy|bc|predictor CONFIG`: train or resume the diffusion policy, the
 behavior-cloning baseline (both learn from demonstrations, grits_lab/policies/demo_training.py)
-or the spillage predictor (which can also score a checkpoint with --eval)."""
+or the spillage predictor (which can also score a checkpoint with --held-out)."""
 
 from __future__ import annotations
 
@@ -9,12 +9,12 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from grits_lab.cli.flags import retire
+from grits_lab.cli.flags import NO_PROGRESS_HELP, retire
 from grits_lab.io import to_json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    train = subparsers.add_parser("train", help="train the diffusion policy or the spillage predictor")
+    train = subparsers.add_parser("train", help="train the diffusion policy, the behavior-cloning baseline or the spillage predictor")
     train_sub = train.add_subparsers(dest="train_target", metavar="WHAT")
     for name, help_text, example, handler in (
         ("policy", "train the diffusion policy on demonstrations (resumes from the last checkpoint)", "experiments/policy_cpu.yaml", _train_policy),
@@ -25,7 +25,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         parser.add_argument("--output-dir", metavar="DIR", help="run directory (overrides output_dir in the config)")
         parser.add_argument("--max-steps", type=int, default=None, help="stop at this step instead of the config's max_steps")
         parser.add_argument("--restart", action="store_true", help="ignore the run's existing checkpoint and start from step 0")
-        parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+        parser.add_argument("--no-progress", action="store_true", help=NO_PROGRESS_HELP)
         retire(parser, "--fresh", "--restart")
         parser.set_defaults(handler=handler)
     _register_predictor(train_sub)
@@ -79,7 +79,7 @@ def _train_bc(args: argparse.Namespace) -> int:
 def _register_predictor(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "predictor",
-        help="train the spillage predictor (or score a checkpoint with --eval)",
+        help="train the spillage predictor (or score a checkpoint with --held-out)",
         description="Train the spillage predictor on a spillage dataset; a rerun resumes after the last finished epoch.",
     )
     parser.add_argument("config", help="experiment YAML (e.g. experiments/predictor_cpu.yaml)")
@@ -87,11 +87,13 @@ def _register_predictor(subparsers: argparse._SubParsersAction) -> None:
                         help="training dataset directory, or several trained on together (overrides data.dataset in the config)")
     parser.add_argument("--output-dir", metavar="DIR", help="where runs are written (overrides output_dir in the config)")
     parser.add_argument("--restart", action="store_true", help="discard the run's checkpoints and start from epoch 1")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar or per-epoch lines")
-    parser.add_argument("--eval", metavar="DATASET", help="only score a checkpoint on every chunk of this (held-out) spillage dataset")
-    parser.add_argument("--checkpoint", default="best", help="with --eval: 'best', 'last' or a checkpoint path (default: best)")
+    parser.add_argument("--no-progress", action="store_true", help=NO_PROGRESS_HELP)
+    parser.add_argument("--held-out", metavar="DATASET",
+                        help="only score a checkpoint on every chunk of this held-out spillage dataset (no training)")
+    parser.add_argument("--checkpoint", default="best", help="with --held-out: 'best', 'last' or a checkpoint path (default: best)")
     parser.add_argument("--label", choices=["chunk", "horizon"],
-                        help="with --eval: score against this label (default: data.label, the one the predictor trained on)")
+                        help="with --held-out: score against this label (default: data.label, the one the predictor trained on)")
+    retire(parser, "--eval", "--held-out")
     parser.set_defaults(handler=_train_predictor)
 
 
@@ -106,7 +108,7 @@ def _train_predictor(args: argparse.Namespace) -> int:
         config.data = dataclasses.replace(config.data, dataset=args.dataset[0] if len(args.dataset) == 1 else list(args.dataset))
     if args.output_dir:
         config.output_dir = args.output_dir
-    if args.eval is None:
+    if args.held_out is None:
         from grits_lab.spillage.predictor_training import train_predictor
 
         return _print_summary(train_predictor(config, restart=args.restart, progress=not args.no_progress))
@@ -118,7 +120,7 @@ def _train_predictor(args: argparse.Namespace) -> int:
 
     torch.set_num_threads(config.train.num_threads)
     path = run_dir(config) / f"{args.checkpoint}.pt" if args.checkpoint in ("best", "last") else Path(args.checkpoint)
-    report = {"checkpoint": str(path), **evaluate_predictor(load_predictor(path), args.eval, n_bins=config.train.ece_bins, label=args.label)}
+    report = {"checkpoint": str(path), **evaluate_predictor(load_predictor(path), args.held_out, n_bins=config.train.ece_bins, label=args.label)}
     suffix = "" if report["label"] == "chunk" else f"_{report['label']}"
-    write_json_atomic(run_dir(config) / f"eval_{Path(args.eval).name}{suffix}.json", report)
+    write_json_atomic(run_dir(config) / f"eval_{Path(args.held_out).name}{suffix}.json", report)
     return _print_summary(report)

@@ -97,7 +97,7 @@ class DiffusionController(LearnedController):
 
     Each plan draws its initial noise from a generator seeded by (episode seed, plan index), so
     dp and grits with rho = 0 see the very same noise and produce the very same episode;
-    `noise_keys(plan)` gives those keys (ScoopSettings.plan_noise_keys: one plan may branch).
+    `noise_keys(plan)` gives those keys (a `ScoopHook`'s, grits_lab/policies/control.py: a study may branch one plan).
     """
 
     def __init__(self, policy: Any, predictor: Any, sampler_kind: str, guidance: GuidanceConfig | None, posthoc: PostHocConfig | None,

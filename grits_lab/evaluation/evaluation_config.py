@@ -81,7 +81,7 @@ class EvaluationConfig(EpisodeGrid):
     flush_every: int = 4  # write the records file after this many finished episodes
     # Also write every episode's scoop chunks (cloud at the chunk's start, its actions, whether
     # it spilled) as a spillage-kind dataset per method under <output_dir>/rollout_chunks/, the
-    # held-out set on which `grits-lab compare-predictors --eval` scores predictors on what the
+    # held-out set on which `grits-lab compare-predictors --held-out` scores predictors on what the
     # policy really does.
     rollout_chunks: bool = False
     # Controllers a lab brings (grits_lab/evaluation/custom_methods.py): name -> the class and its options.
@@ -103,10 +103,6 @@ class EvaluationConfig(EpisodeGrid):
             if m in custom:
                 controller_class(m, custom[m])  # imported now: a wrong name fails at load
         require(len(set(self.methods)) == len(self.methods), "methods", self.methods, "without repeats")
-        if self.scoop.branch_plan is not None:  # only a diffusion policy's plans draw noise to branch on
-            for m in self.methods:
-                require(m in METHODS and METHODS[m].kind == "diffusion", "methods", m,
-                        "a diffusion-policy method (dp, dp_post, grits*) when scoop.branch_plan is set")
         require(self.num_threads >= 1, "num_threads", self.num_threads, "at least 1")
         require(self.flush_every >= 1, "flush_every", self.flush_every, "at least 1")
         self.transfer.require_time_step_fits(self.sim, "transfer.time_step")
@@ -118,6 +114,26 @@ def load_evaluation_config(path: str | Path, overrides: dict[str, Any] | None = 
     if overrides:
         data = merge_mappings(data, overrides)
     try:
-        return config_from_dict(EvaluationConfig, data)
+        return config_from_dict(EvaluationConfig, without_retired_keys(data))
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
+
+
+# Keys the scoop block held before its perturbations moved to a hook (grits_lab/policies/control.py
+# `ScoopHook`), with the value that meant "off". Run directories written before then store them in
+# config.yaml; at that value they are dropped, so those runs still load, resume and replay.
+RETIRED_SCOOP_KEYS: dict[str, object] = {"action_offset": 0.0, "action_offset_draw": 0, "branch_plan": None, "branch_draw": 0}
+
+
+def without_retired_keys(data: dict[str, Any]) -> dict[str, Any]:
+    """`data` (an evaluation config's mapping) less the retired `scoop` keys at their "off" value;
+    ConfigError naming the key when one is set: that perturbation is a study's hook now
+    (`python -m studies.outcome_sensitivity`)."""
+    scoop = data.get("scoop")
+    if not isinstance(scoop, dict) or not set(scoop) & set(RETIRED_SCOOP_KEYS):
+        return data
+    for key, off in RETIRED_SCOOP_KEYS.items():
+        if key in scoop and scoop[key] != off:
+            raise ConfigError(f"`scoop.{key}` is no longer an evaluation setting: the nudge and the branches are a "
+                              f"scoop hook (`python -m studies.outcome_sensitivity --help`); remove the key")
+    return {**data, "scoop": {k: v for k, v in scoop.items() if k not in RETIRED_SCOOP_KEYS}}

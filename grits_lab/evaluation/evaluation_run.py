@@ -32,7 +32,7 @@ from grits_lab.errors import InputError, StorageError
 from grits_lab.evaluation.evaluation_config import EvaluationConfig, load_evaluation_config
 from grits_lab.evaluation.task_episode import evaluation_episode
 from grits_lab.evaluation.grid import EpisodeKey
-from grits_lab.policies.control import ScoopSettings
+from grits_lab.policies.control import NO_HOOK_COLUMNS, ScoopHook
 from grits_lab.evaluation.methods import (
     METHODS, check_method_checkpoints, file_digest, guidance_columns, guidance_gap, method_checkpoints, method_spec,
     checkpoint_identity,
@@ -59,6 +59,7 @@ class EpisodeParams:
     config: EvaluationConfig
     paths: dict[str, str]
     digests: dict[str, str]
+    hook: ScoopHook | None = None  # perturbs the scoop from outside (grits_lab/policies/control.py); None: none
 
 
 def episode_keys(config: EvaluationConfig) -> list[EpisodeKey]:
@@ -75,8 +76,10 @@ def identity_of(row: dict[str, Any]) -> tuple:
 
 
 def build_specs(config: EvaluationConfig, keys: Iterable[EpisodeKey], methods: list[str] | None = None,
-                paths: dict[str, dict[str, str]] | None = None, digests: dict[str, str] | None = None) -> list[EpisodeSpec]:
-    """Specs for methods x keys, method outermost in the list but interleaved by episode for early comparisons."""
+                paths: dict[str, dict[str, str]] | None = None, digests: dict[str, str] | None = None,
+                hook: ScoopHook | None = None) -> list[EpisodeSpec]:
+    """Specs for methods x keys, method outermost in the list but interleaved by episode for early
+    comparisons; every episode's scoop hooked by `hook` (None: none)."""
     methods = methods or list(config.methods)
     paths = paths if paths is not None else {m: method_checkpoints(m, config.checkpoints) for m in methods}
     digests = digests if digests is not None else checkpoint_digests(paths)
@@ -84,7 +87,7 @@ def build_specs(config: EvaluationConfig, keys: Iterable[EpisodeKey], methods: l
     for key in keys:
         for method in methods:
             params = EpisodeParams(config.run_id, method, key.trial, key.split, config, paths[method],
-                                   {k: digests[p] for k, p in paths[method].items()})
+                                   {k: digests[p] for k, p in paths[method].items()}, hook)
             specs.append(EpisodeSpec(
                 episode_id=f"{method}-{key.food}-{key.level}-{key.trial}", work=evaluation_episode, seed=key.seed,
                 food=key.food, level=key.level, params={"evaluation": params},
@@ -99,7 +102,7 @@ def checkpoint_digests(paths: dict[str, dict[str, str]]) -> dict[str, str]:
 
 def failed_episode_record(spec: EpisodeSpec, error: str, wall_time_s: float) -> dict[str, Any]:
     """The record of an episode that raised or whose worker died: every outcome False, the error kept,
-    and the run's scoop diagnostics (`ScoopSettings.record_columns`), so that resuming the run finds
+    and the run's scoop hook columns (`ScoopHook.record_columns`), so that resuming the run finds
     every record made under its own settings."""
     p: EpisodeParams = spec.params["evaluation"]
     rho, s = guidance_columns(p.method, p.config)
@@ -108,7 +111,7 @@ def failed_episode_record(spec: EpisodeSpec, error: str, wall_time_s: float) -> 
         "trial": p.trial, "seed": spec.seed, "task_success": False, "spillage": False, "scoop_failure": False,
         "scoop_success": False, "spilled_before_scoop": False, "n_particles": -1, "spilled": -1, "scooped": -1,
         "transferred": -1, "rho": rho, "s": s, "error": error or "unknown error", "wall_time_s": wall_time_s,
-        **p.config.scoop.record_columns(), **{f"checkpoint_{k}": d for k, d in p.digests.items()},
+        **(p.hook or ScoopHook()).record_columns(), **{f"checkpoint_{k}": d for k, d in p.digests.items()},
     }
 
 
@@ -139,7 +142,7 @@ ROLLOUT_CHUNKS_DIR = "rollout_chunks"
 
 def write_rollout_chunks(out: Path, record: dict[str, Any], episode: dict[str, Any]) -> Path:
     """Write one episode's scoop chunks into `out/rollout_chunks/<method>/`, a spillage-kind dataset
-    that `grits-lab compare-predictors --eval` scores. The now stale index is removed; the first
+    that `grits-lab compare-predictors --held-out` scores. The now stale index is removed; the first
     reader rebuilds it from the episode files (`grits_lab.data.format.load_index`)."""
     from grits_lab.data.format import INDEX_FILE, MANIFEST_FILE, write_episode
 
@@ -224,39 +227,30 @@ def _refuse_other_checkpoints(records_path: Path, done: list[dict[str, Any]], pa
 
 
 def _without_unstated_failures(done: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The records less those of failed episodes that name no scoop diagnostics: earlier code wrote
+    """The records less those of failed episodes that name no scoop hook columns: earlier code wrote
     none on a failed record, so the setting it failed under is unknown. They are run again (and
-    their rows replaced) instead of being taken as finished under whatever the config sets now."""
-    columns = list(ScoopSettings().record_columns())
+    their rows replaced) instead of being taken as finished under whatever the run sets now."""
+    columns = list(NO_HOOK_COLUMNS)
     if not done:
         return done
     failed = has_error(pd.Series([r.get("error") for r in done], dtype=object)).to_numpy()
     return [r for r, f in zip(done, failed) if not (f and not any(_present(r.get(c)) for c in columns))]
 
 
-def _refuse_other_scoop_diagnostics(records_path: Path, done: list[dict[str, Any]], scoop: ScoopSettings) -> None:
-    """Records whose scoop ran with another `scoop.action_offset` (or `action_offset_draw`), or another
-    `scoop.branch_plan` / `branch_draw`, are not resumed under this one (a run directory holds one of
-    each; records from before the columns ran without any). InputError naming both."""
-    want = scoop.record_columns()
-    defaults = ScoopSettings().record_columns()
+def _refuse_other_hook(records_path: Path, done: list[dict[str, Any]], hook: ScoopHook) -> None:
+    """Records whose scoop ran under another hook (other `ScoopHook.record_columns`: a nudge, a branch
+    of studies/outcome_sensitivity) are not resumed under this one: a run directory holds one; records
+    from before the columns ran without any. InputError naming both."""
+    want = hook.record_columns()
 
     def recorded(r: dict[str, Any]) -> tuple:
-        return tuple(type(want[c])(r[c]) if _present(r.get(c)) else defaults[c] for c in want)
+        return tuple(type(want[c])(r[c]) if _present(r.get(c)) else NO_HOOK_COLUMNS.get(c) for c in want)
 
-    other = sorted({recorded(r) for r in done} - {tuple(want.values())})
-    if not other:
-        return
-    offset, draw, plan, branch = other[0]
-    if (offset, draw) != (want["scoop_action_offset_m"], want["scoop_action_offset_draw"]):
-        raise InputError(f"{records_path} holds episodes run with `scoop.action_offset` {offset:g} m (draw {draw}), "
-                         f"but the config sets {want['scoop_action_offset_m']:g} m (draw {want['scoop_action_offset_draw']}); "
-                         "choose another output_dir (or rerun with --restart to discard them)")
-    def named(p: int, d: int) -> str:
-        return "no branch" if p < 0 else f"`scoop.branch_plan` {p} (draw {d})"
-    raise InputError(f"{records_path} holds episodes run with {named(plan, branch)}, but the config sets "
-                     f"{named(want['scoop_branch_plan'], want['scoop_branch_draw'])}; choose another output_dir "
-                     "(or rerun with --restart to discard them)")
+    other = sorted({recorded(r) for r in done} - {tuple(want.values())}, key=str)
+    if other:
+        named = lambda values: ", ".join(f"{c} {v:g}" for c, v in zip(want, values))
+        raise InputError(f"{records_path} holds episodes whose scoop ran with {named(other[0])}, but this run's scoop hook "
+                         f"writes {named(want.values())}; choose another output_dir (or rerun with --restart to discard them)")
 
 
 def other_kernels_note(records_path: Path, done: list[dict[str, Any]]) -> str:
@@ -331,29 +325,35 @@ def provenance(config: EvaluationConfig, paths: dict[str, dict[str, str]], diges
     }
 
 
-def evaluate(config: EvaluationConfig, *, progress: bool = True, restart: bool = False, executor: Executor | None = None) -> pd.DataFrame:
-    """Run (or resume) the evaluation described by `config`; returns every record of the run directory."""
+def evaluate(config: EvaluationConfig, *, progress: bool = True, restart: bool = False, executor: Executor | None = None,
+             hook: ScoopHook | None = None) -> pd.DataFrame:
+    """Run (or resume) the evaluation described by `config`; returns every record of the run directory.
+    `hook` perturbs every episode's scoop from outside (grits_lab/policies/control.py `ScoopHook`);
+    its `check(config)` runs first."""
+    if hook is not None:
+        hook.check(config)
     paths = {m: method_checkpoints(m, config.checkpoints) for m in config.methods}
     for method in config.methods:
         check_method_checkpoints(method, paths[method], config.guidance)
     keys = episode_keys(config)
     digests = checkpoint_digests(paths)
-    specs = build_specs(config, keys, paths=paths, digests=digests)
+    specs = build_specs(config, keys, paths=paths, digests=digests, hook=hook)
     if executor is None:
         check_reachable(cluster_address(config.executor))
     out = ensure_writable_dir(config.output_dir)  # only once the run is known to be possible
     with exclusive_directory(out, "evaluate"):
-        return _evaluate_in(out, config, specs, paths, digests, progress, restart, executor)
+        return _evaluate_in(out, config, specs, paths, digests, progress, restart, executor, hook)
 
 
 def _evaluate_in(out: Path, config: EvaluationConfig, specs: list[EpisodeSpec], paths: dict[str, dict[str, str]],
-                 digests: dict[str, str], progress: bool, restart: bool, executor: Executor | None) -> pd.DataFrame:
+                 digests: dict[str, str], progress: bool, restart: bool, executor: Executor | None,
+                 hook: ScoopHook | None = None) -> pd.DataFrame:
     """`evaluate` once it holds the run directory: resume, write what describes the records, run the rest."""
     records_path = out / RECORDS_FILE
     done = [] if restart else _without_unstated_failures(_load_existing(records_path))
     _refuse_other_protocol(records_path, done)
     _refuse_other_checkpoints(records_path, done, paths, digests)
-    _refuse_other_scoop_diagnostics(records_path, done, config.scoop)
+    _refuse_other_hook(records_path, done, hook or ScoopHook())
     recorded_methods = list(dict.fromkeys(str(r["method"]) for r in done))
     from grits_lab.evaluation.custom_methods import registered_methods
 

@@ -181,8 +181,11 @@ def guidance_columns(name: str, config: EvaluationConfig) -> tuple[float, int]:
 
 
 def build_controller(name: str, config: EvaluationConfig, paths: dict[str, str],
-                     cache: Callable[[Any, Callable[[], Any]], Any]) -> Controller:
-    """The scoop controller of method `name`; `cache(key, factory)` keeps loaded models per worker."""
+                     cache: Callable[[Any, Callable[[], Any]], Any],
+                     noise_keys: Callable[[int], tuple[object, ...]] | None = None) -> Controller:
+    """The scoop controller of method `name`; `cache(key, factory)` keeps loaded models per worker;
+    `noise_keys(plan)`: the keys of a sampling controller's plan noise (`ScoopHook.noise_keys`; None:
+    ("plan", plan))."""
     from grits_lab.evaluation import controllers
 
     spec = method_spec(name, config)
@@ -217,7 +220,7 @@ def build_controller(name: str, config: EvaluationConfig, paths: dict[str, str],
         predictor = cache(("predictor", paths[key]), lambda: load_predictor(paths[key]))
     return controllers.DiffusionController(
         policy, predictor, spec.sampler, config.guidance, config.posthoc,
-        raw_cloud=(spec.predictor == "predictor_raw"), noise_keys=config.scoop.plan_noise_keys,
+        raw_cloud=(spec.predictor == "predictor_raw"), noise_keys=noise_keys,
     )
 
 

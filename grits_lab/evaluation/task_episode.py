@@ -26,6 +26,7 @@ from grits_lab.evaluation.controllers import ObsHistory, is_still
 from grits_lab.evaluation.episode_scene import EpisodeScene
 from grits_lab.evaluation.transfer import Obstacle, choose_transfer, locate_bowl
 from grits_lab.geometry import cubic_pose_path
+from grits_lab.policies.control import ScoopHook
 from grits_lab.records import CPU_KERNELS, LOAD_ACCOUNT
 from grits_lab.sim.env import matrix_to_pose9
 from grits_lab.versions import cpu_kernels
@@ -39,16 +40,16 @@ if TYPE_CHECKING:  # annotations only: no import cost, no cycle
 
 
 def run_scoop(env: ScoopEnv, controller: Controller, scene: EpisodeScene, history: ObsHistory, settings: ScoopSettings,
-              record_chunks: bool = False) -> dict[str, Any]:
+              record_chunks: bool = False, hook: ScoopHook | None = None) -> dict[str, Any]:
     """Stage 1; returns the scoop's measurements, guidance diagnostics and timings.
 
     With `record_chunks`, also "chunks": every executed chunk's composite cloud at its start
     (3, N, 3), its first action's index in the scoop and the spilled count before it, plus the
     scoop's executed actions (T, 9) (see `rollout_chunk_episode`).
 
-    `settings.action_offset` > 0 moves every action the simulator executes (not the history the
-    controller reads, which keeps what it asked for) by `settings.offset_vector(scene.seed)`; with
-    `settings.branch_plan` set, only from that plan on (a nudged replay of the same sample from one state).
+    `hook` (grits_lab/policies/control.py `ScoopHook`; None: the base, which changes nothing) gives
+    what the simulator executes for each planned action, the settling hold included; the history the
+    controller reads keeps what it asked for.
     """
     cloud_steps = int(getattr(controller, "cloud_steps", 0))
     image_steps = int(getattr(controller, "image_steps", 0))
@@ -64,8 +65,7 @@ def run_scoop(env: ScoopEnv, controller: Controller, scene: EpisodeScene, histor
         if image_steps and index not in history.rgbd:
             history.rgbd[index] = scene.rgbd(tuple(encoder.image_size), encoder.cameras)
 
-    nudge = settings.offset_vector(scene.seed)
-    offset = nudge if settings.branch_plan is None else np.zeros_like(nudge)  # before the branch plan: shared
+    hook = hook or ScoopHook()
     controller.reset(scene)
     steps, plans, completion_step = 0, 0, -1
     plan_times: list[float] = []
@@ -84,8 +84,6 @@ def run_scoop(env: ScoopEnv, controller: Controller, scene: EpisodeScene, histor
             stop_reason = "controller_done"
             break
         plans += 1
-        if settings.branch_plan is not None and plans - 1 >= settings.branch_plan:
-            offset = nudge
         plan_times.append(chunk.plan_time_s)
         if chunk.diagnostics:
             diagnostics.append(chunk.diagnostics)
@@ -100,9 +98,10 @@ def run_scoop(env: ScoopEnv, controller: Controller, scene: EpisodeScene, histor
             chunk_log.append((steps, chunk_cloud, spilled_before))
         ended = False
         for i, action in enumerate(actions):
-            obs, _, terminated, truncated, _ = env.step(action + offset)
+            sent = hook.executed(action, scene.seed, plans - 1)
+            obs, _, terminated, truncated, _ = env.step(sent)
             last_action = action
-            executed.append(np.asarray(action + offset, dtype=np.float32))  # what the spoon was sent to
+            executed.append(np.asarray(sent, dtype=np.float32))  # what the spoon was sent to
             steps += 1
             scene.advance()
             history.append(obs, action)
@@ -118,7 +117,7 @@ def run_scoop(env: ScoopEnv, controller: Controller, scene: EpisodeScene, histor
         if ended:
             break
     for _ in range(settings.settle_steps):
-        env.step(last_action + offset)
+        env.step(hook.executed(last_action, scene.seed, plans - 1))
         scene.advance()
     metrics = env.metrics()
     end_step = steps - 1 if completion_step < 0 else completion_step
@@ -315,8 +314,9 @@ def begin_episode(env: ScoopEnv, builder: CloudBuilder, *, seed: int, food: str,
 
 
 def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationConfig, *, seed: int, food: str, level: str,
-                     builder: CloudBuilder) -> dict[str, Any]:
+                     builder: CloudBuilder, hook: ScoopHook | None = None) -> dict[str, Any]:
     """The whole task for one (method, food, level, seed); returns the metric part of the record.
+    `hook` perturbs the scoop from outside (`run_scoop`); its `record_columns` go into the record.
 
     With `config.rollout_chunks`, the record also holds "_chunks": the scoop as a spillage-dataset
     episode (`rollout_chunk_episode`), which the driver writes and drops from the record.
@@ -325,7 +325,8 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
     scene, history = begin_episode(env, builder, seed=seed, food=food, level=level)
     n_particles = int(env.metrics()["n_particles"])
     record_chunks = bool(getattr(config, "rollout_chunks", False))
-    scoop = run_scoop(env, controller, scene, history, config.scoop, record_chunks=record_chunks)
+    hook = hook or ScoopHook()
+    scoop = run_scoop(env, controller, scene, history, config.scoop, record_chunks=record_chunks, hook=hook)
     m = scoop["metrics"]
     load = env.particle_counts().lifted.copy()  # the particles `scooped` counts, followed to the episode's end
     scoop_time = time.perf_counter() - start
@@ -353,7 +354,7 @@ def run_task_episode(env: ScoopEnv, controller: Controller, config: EvaluationCo
         "plan_time_mean_s": scoop["plan_time_mean_s"],
         "plan_time_max_s": scoop["plan_time_max_s"],
         "scoop_time_s": scoop_time,
-        **config.scoop.record_columns(),
+        **hook.record_columns(),
         CPU_KERNELS: cpu_kernels(),
         **summarize_guidance(scoop["diagnostics"]),
     }
@@ -435,8 +436,9 @@ def evaluation_episode(spec: EpisodeSpec, context: WorkerContext) -> dict[str, A
     from grits_lab.config import config_fingerprint
 
     builder = context.cached(("cloud-builder", config_fingerprint(config.cloud)), lambda: builder_for_env(config.cloud, env))
-    controller = build_controller(p.method, config, p.paths, context.cached)
-    record = run_task_episode(env, controller, config, seed=spec.seed, food=spec.food, level=spec.level, builder=builder)
+    hook = p.hook or ScoopHook()
+    controller = build_controller(p.method, config, p.paths, context.cached, noise_keys=hook.noise_keys)
+    record = run_task_episode(env, controller, config, seed=spec.seed, food=spec.food, level=spec.level, builder=builder, hook=hook)
     rho, s = guidance_columns(p.method, config)
     record.update({
         "run_id": p.run_id, "method": p.method, "food": spec.food, "split": p.split, "level": spec.level,

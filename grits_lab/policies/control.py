@@ -53,23 +53,6 @@ class ScoopSettings:
     min_steps: int = 24  # never stop before this many actions (the spoon starts still)
     n_action_steps: int | None = None  # null: the policy's own (12 at the paper's settings)
     settle_steps: int = 5  # actions holding the last pose before the scoop is judged
-    # A diagnostic, 0 in every protocol config: every executed scoop action (and the settling hold)
-    # is moved rigidly by this many metres, along a direction drawn from the episode's seed, so a
-    # run on the same seeds tells how often an outcome changes when the spoon goes where the policy
-    # asked, give or take a distance no observation resolves (docs/evaluation.md, "Outcome sensitivity").
-    action_offset: float = 0.0
-    # Which seeded set of directions the offset takes: 0, 1, ... give independent nudges of the same
-    # size on the same seeds (a second draw tells a nudge's chance part from the nudge's own effect).
-    action_offset_draw: int = 0
-    # A diagnostic, null in every protocol config: the plan with this index (0 = the scoop's first)
-    # draws its initial noise from draw `branch_draw` instead of the episode's own, every other plan
-    # from the episode's own. Runs on the same seeds that differ only in `branch_draw` share every
-    # step before that plan and then execute another sample of the diffusion policy from one and the
-    # same state (docs/evaluation.md, "Branches from one state"). Draw 0 is the unbranched episode.
-    # With a branch plan, `action_offset` moves the actions from that plan on only: the same sample,
-    # nudged, from the same state.
-    branch_plan: int | None = None
-    branch_draw: int = 0
 
     def __post_init__(self) -> None:
         require(self.max_steps >= 1, "scoop.max_steps", self.max_steps, "at least 1")
@@ -77,44 +60,43 @@ class ScoopSettings:
         require(self.min_steps >= 0, "scoop.min_steps", self.min_steps, "non-negative")
         require(self.n_action_steps is None or self.n_action_steps >= 1, "scoop.n_action_steps", self.n_action_steps, "at least 1 or null")
         require(self.settle_steps >= 0, "scoop.settle_steps", self.settle_steps, "non-negative")
-        require(0.0 <= self.action_offset <= 0.01, "scoop.action_offset", self.action_offset,
-                "in [0, 0.01] metres (a diagnostic nudge, not a motion: 0.0005 is half a millimetre)")
-        require(self.action_offset_draw >= 0, "scoop.action_offset_draw", self.action_offset_draw, "non-negative")
-        require(self.action_offset_draw == 0 or self.action_offset > 0, "scoop.action_offset_draw", self.action_offset_draw,
-                "0 unless scoop.action_offset sets a nudge to draw directions for")
-        require(self.branch_plan is None or self.branch_plan >= 0, "scoop.branch_plan", self.branch_plan,
-                "a plan index (0 = the scoop's first) or null")
-        require(self.branch_draw >= 0, "scoop.branch_draw", self.branch_draw, "non-negative")
-        require(self.branch_draw == 0 or self.branch_plan is not None, "scoop.branch_draw", self.branch_draw,
-                "0 unless scoop.branch_plan names the plan that branches")
 
-    def plan_noise_keys(self, plan: int) -> tuple[object, ...]:
-        """The keys after the episode's seed (`derive_seed(seed, *keys)`) of plan `plan`'s initial noise:
-        ("plan", plan), with ("branch", branch_draw) added at `branch_plan` when `branch_draw` > 0."""
-        if self.branch_plan is not None and self.branch_draw > 0 and plan == self.branch_plan:
-            return ("plan", plan, "branch", self.branch_draw)
+
+# The record columns of a scoop hook, at the values of none (`ScoopHook.record_columns`). Every
+# record has carried them since scoop diagnostics were first recorded, so records with and without
+# a hook stay one table; their names are those of the perturbations studies/outcome_sensitivity runs
+# through a hook (a nudge of the executed actions, another noise draw at one plan).
+NO_HOOK_COLUMNS: dict[str, float | int] = {"scoop_action_offset_m": 0.0, "scoop_action_offset_draw": 0,
+                                           "scoop_branch_plan": -1, "scoop_branch_draw": 0}
+
+
+class ScoopHook:
+    """The scoop loop's one extension point, as a Gymnasium wrapper grows an unchanged env: this base
+    changes nothing, and a subclass perturbs the scoop from outside the framework.
+
+    grits_lab/evaluation/task_episode.py `run_scoop` asks it, for plan `plan` (0 = the scoop's first;
+    -1 before any) of the episode with seed `seed`:
+      noise_keys(plan) -> the keys after the episode's seed (`derive_seed(seed, *keys)`) of that plan's
+          initial noise, for the controllers that sample (DiffusionController); ("plan", plan) here.
+      executed(action, seed, plan) -> (9,) what the simulator executes for the planned action (9,);
+          the history the controller reads keeps what it asked for. Here `action` as float64 (a
+          copy plus a zero offset, bit for bit what the loop has always sent).
+    Evaluation writes `record_columns()` into every record, refuses to resume records written under
+    other values, and calls `check(config)` before any episode (raise InputError for a config the
+    hook cannot run with). A hook is pickled to the workers: keep it plain data.
+    """
+
+    def noise_keys(self, plan: int) -> tuple[object, ...]:
         return ("plan", plan)
 
-    def record_columns(self) -> dict[str, float | int]:
-        """The record columns of the diagnostic settings, as evaluation writes them:
-        `scoop_action_offset_m` and `scoop_action_offset_draw` (0 without an offset),
-        `scoop_branch_plan` (-1: none) and `scoop_branch_draw`. A record without them (made before
-        they were recorded) ran with the defaults."""
-        return {"scoop_action_offset_m": float(self.action_offset),
-                "scoop_action_offset_draw": int(self.action_offset_draw) if self.action_offset else 0,
-                "scoop_branch_plan": -1 if self.branch_plan is None else int(self.branch_plan),
-                "scoop_branch_draw": int(self.branch_draw)}
+    def executed(self, action: np.ndarray, seed: int, plan: int) -> np.ndarray:
+        return action + np.zeros(9)
 
-    def offset_vector(self, seed: int) -> np.ndarray:
-        """(9,) what is added to every executed scoop action: `action_offset` metres in position along
-        a unit direction drawn uniformly on the sphere from `seed` (the episode's) and
-        `action_offset_draw`, no rotation. Zeros when `action_offset` is 0."""
-        offset = np.zeros(9)
-        if self.action_offset > 0.0:
-            draw = ("action-offset",) if self.action_offset_draw == 0 else ("action-offset", self.action_offset_draw)
-            direction = np.random.default_rng(derive_seed(int(seed), *draw)).normal(size=3)
-            offset[:3] = self.action_offset * direction / np.linalg.norm(direction)
-        return offset
+    def record_columns(self) -> dict[str, float | int]:
+        return dict(NO_HOOK_COLUMNS)
+
+    def check(self, config: Any) -> None:
+        return None
 
 
 @dataclass

@@ -140,7 +140,7 @@ def load_run_config(run_dir: str | Path, record: dict[str, Any]) -> Any:
     """RUN_DIR/config.yaml as an EvaluationConfig, with the record's guidance setting (rho, s) put in."""
     from grits_lab.config import config_from_dict, load_yaml
     from grits_lab.errors import ConfigError
-    from grits_lab.evaluation.evaluation_config import EvaluationConfig
+    from grits_lab.evaluation.evaluation_config import EvaluationConfig, without_retired_keys
     from grits_lab.evaluation.methods import METHODS, guidance_gap
 
     path = Path(run_dir) / "config.yaml"
@@ -155,7 +155,7 @@ def load_run_config(run_dir: str | Path, record: dict[str, Any]) -> Any:
     if method in METHODS and METHODS[method].sampler == "posthoc" and not _is_nan(rho):
         data["posthoc"] = {**data.get("posthoc", {}), "rho": float(rho)}
     try:
-        config = config_from_dict(EvaluationConfig, data)
+        config = config_from_dict(EvaluationConfig, without_retired_keys(data))
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
     if rho is not None and not _is_nan(rho) and guidance_gap(method, config) is None:  # grits*, or a guided registered controller

@@ -16,6 +16,7 @@ Diffusion Policy" (or "Paired with each other" when settings are paired too).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any, Callable
 
 import pandas as pd
 
@@ -24,7 +25,6 @@ from grits_lab.intervals import sign_test_p
 from grits_lab.io import ensure_writable_dir, write_text_atomic
 from grits_lab.markdown import markdown_table
 from grits_lab.records import CPU_KERNELS
-from grits_lab.report.outcome_ceiling import CEILING_OUTCOMES, repeatability
 from grits_lab.report.run_records import load_run
 from grits_lab.report.spill_tables import (delivered_share, has_attribution, lifted_episodes, spilled_after_scoop,
                                            spilled_before_pour)
@@ -32,8 +32,11 @@ from grits_lab.report.tables import ReportTable
 from grits_lab.report.vocabulary import PAPER_DEFAULTS, at_paper_defaults, method_display
 
 PAIR_KEYS = ("method", "food", "level", "trial")
-OFFSET_COLUMN = "scoop_action_offset_m"  # `scoop.action_offset` of the run (docs/evaluation.md, "Outcome sensitivity")
-DRAW_COLUMN = "scoop_action_offset_draw"  # `scoop.action_offset_draw`: which seeded directions
+OFFSET_COLUMN = "scoop_action_offset_m"  # a scoop hook's nudge of the run (NO_HOOK_COLUMNS, grits_lab/policies/control.py)
+DRAW_COLUMN = "scoop_action_offset_draw"  # which seeded directions the nudge took
+# The outcomes whose AUROC ceiling a comparison table may hold (`<outcome>_auroc_ceiling` columns,
+# added by a `per_method` callable such as studies/outcome_sensitivity's; comparison_markdown shows them).
+CEILING_OUTCOMES = ("spillage", "spill_before_pour", "task_success")
 COMPARISON_FILE = "comparison.csv"
 PAIRED_METHODS_FILE = "paired.csv"
 PAIR_REFERENCE = "dp"  # the unguided policy every guided variant is compared with
@@ -102,13 +105,14 @@ def _equal(a: pd.Series, b: pd.Series) -> pd.Series:
     return (a == b) | (a.isna() & b.isna())
 
 
-def compare_runs(before: pd.DataFrame, after: pd.DataFrame, *, ceiling: bool = False) -> pd.DataFrame:
+def compare_runs(before: pd.DataFrame, after: pd.DataFrame, *,
+                 per_method: Callable[[pd.DataFrame, dict[str, Any]], dict[str, Any]] | None = None) -> pd.DataFrame:
     """Per method (one row each, in `before`'s order): paired episodes, equal scoops, and for every
     outcome of `PAIRED_OUTCOMES` the columns `<outcome>_before`, `_after` (episodes with it),
     `_only_before`, `_only_after` and `_p` (`sign_test_p`). Episodes with an error in either run
-    are left out (`errors` counts them). The AUROC-ceiling columns come when the runs differ by a nudge
-    (offset or draw) or every pair ran on other CPU kernels, or with `ceiling` (the caller declares the
-    runs two draws of one chance that the records do not name; `ceiling_declared`)."""
+    are left out (`errors` counts them). `per_method(pairs, row)`, where given, returns more columns of
+    a method's row from its paired episodes without errors (columns suffixed `_before` / `_after`) and
+    the row so far: a study's analysis (studies/outcome_sensitivity: the AUROC ceiling)."""
     # records from before these columns ran without an offset and do not name their kernels; both sides
     # hold every column, so the merge suffixes it
     missing = {OFFSET_COLUMN: 0.0, DRAW_COLUMN: 0, CPU_KERNELS: None}
@@ -137,14 +141,8 @@ def compare_runs(before: pd.DataFrame, after: pd.DataFrame, *, ceiling: bool = F
             row.update({f"{outcome}_before": int(a.sum()), f"{outcome}_after": int(b.sum()),
                         f"{outcome}_only_before": int((a & ~b).sum()), f"{outcome}_only_after": int((b & ~a).sum())})
             row[f"{outcome}_p"] = sign_test_p(row[f"{outcome}_only_before"], row[f"{outcome}_only_after"])
-        nudged_apart = (row["action_offset_before_m"] != row["action_offset_after_m"]
-                        or row["action_offset_before_m"] > 0 and row["action_offset_draw_before"] != row["action_offset_draw_after"])
-        row["ceiling_declared"] = bool(ceiling)
-        if len(pairs) and (nudged_apart or row["kernels_differ"] == len(pairs) or ceiling):
-            # one run nudges the scoop where the other does not, or the other way, or every pair ran on other CPU kernels:
-            # each outcome's changes are its chance part
-            for _, c in repeatability(pairs).iterrows():
-                row.update({f"{c['outcome']}_{k}": c[k] for k in ("auroc_ceiling", "auroc_ceiling_low", "auroc_ceiling_high")})
+        if per_method is not None:
+            row.update(per_method(pairs, row))
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -285,7 +283,7 @@ def comparison_markdown(table: pd.DataFrame) -> str:
                  for side in ("before", "after")}
         named = {side: f"{offsets.get(side, 0.0) * 1000:g} mm" + (f" (draw {draws[side]})" if offsets.get(side) and any(draws.values()) else "")
                  for side in ("before", "after")}
-        lines[-1] += (f" Scoop actions offset (`scoop.action_offset`): {named['before']} in {before}, "
+        lines[-1] += (f" Scoop actions offset (`scoop_action_offset_m`): {named['before']} in {before}, "
                       f"{named['after']} in {after}: the changes are what that offset did.")
     if {"guidance_before", "guidance_after"} <= set(table.columns):
         apart = table[table["guidance_before"].fillna("") != table["guidance_after"].fillna("")]
@@ -302,7 +300,7 @@ def comparison_markdown(table: pd.DataFrame) -> str:
     perturbation = " and ".join(p for p, held in (("offset", any(offsets.values())), ("kernels", differ)) if held) or (
         "difference between the runs" if declared else "offset")
     if declared and perturbation == "difference between the runs":
-        lines[-1] += (" The runs are compared as two draws of one chance (`--ceiling`): what differs between them is "
+        lines[-1] += (" The runs are compared as two draws of one chance (`--declared`): what differs between them is "
                       "not in the records.")
     ceilings = [o for o in CEILING_OUTCOMES if f"{o}_auroc_ceiling" in table.columns]
     if ceilings:
@@ -313,7 +311,7 @@ def comparison_markdown(table: pd.DataFrame) -> str:
         lines += ["", markdown_table(["Method", "Outcome", "Rate, both runs", f"Changed by the {perturbation}", "AUROC ceiling [95 %]"], rows), "",
                   f"The {perturbation} is taken as chance the observations cannot show: each episode a coin, its two runs two tosses. "
                   "AUROC ceiling: the best any predictor of what both runs share can rank the outcome, over every coin mix "
-                  "with the measured rate and changes (grits_lab/report/outcome_ceiling.py); interval from resampling "
+                  "with the measured rate and changes (studies/outcome_sensitivity/ceiling.py); interval from resampling "
                   "episodes (200 resamples)."]
     return "\n".join(lines)
 
@@ -332,9 +330,10 @@ def write_comparison(table: pd.DataFrame, markdown: str, output_dir: str | Path)
     return [out / COMPARISON_FILE, out / "comparison.md"]
 
 
-def compare_run_dirs(before: str | Path, after: str | Path, *, ceiling: bool = False) -> tuple[pd.DataFrame, str]:
-    """`compare_runs` on the records of two run directories, and its Markdown."""
-    table = compare_runs(_episodes(before), _episodes(after), ceiling=ceiling)
+def compare_run_dirs(before: str | Path, after: str | Path, *,
+                     per_method: Callable[[pd.DataFrame, dict[str, Any]], dict[str, Any]] | None = None) -> tuple[pd.DataFrame, str]:
+    """`compare_runs` on the records of two run directories (`per_method` as there), and its Markdown."""
+    table = compare_runs(_episodes(before), _episodes(after), per_method=per_method)
     table.insert(0, "after", Path(after).name)
     table.insert(0, "before", Path(before).name)
     return table, comparison_markdown(table)

@@ -45,11 +45,11 @@ import numpy as np
 from gymnasium import spaces
 
 from grits_lab.geometry import axis_angle_matrix
-from grits_lab.versions import PROTOCOL_VERSION
+from grits_lab.versions import ENV_VERSION
 from grits_lab.sim.sim_config import SimConfig
 from grits_lab.sim.env import DEFAULT_FOOD, ScoopEnv, matrix_to_pose9, pose9_to_matrix
 
-ENV_ID = f"grits_lab/Scoop-v{PROTOCOL_VERSION}"  # the task protocol's version (grits_lab/versions.py)
+ENV_ID = f"grits_lab/Scoop-v{ENV_VERSION}"  # the scoop env's own version (grits_lab/versions.py)
 N_JOINTS = 7
 ACTION_MODES = ("relative", "absolute")
 

@@ -126,7 +126,7 @@ def within_strata(predictions: pd.DataFrame) -> dict[str, np.ndarray]:
         out["auroc_within"] = food
     if "chunk" in predictions.columns and predictions["chunk"].nunique() > 1:
         out["auroc_within_position"] = np.asarray([f"{f}#{c}" for f, c in zip(food, predictions["chunk"].to_numpy())])
-    if "state" in predictions.columns:  # a branch study's draws (grits_lab/report/branches.py)
+    if "state" in predictions.columns:  # a branch study's draws (studies/outcome_sensitivity/branches.py)
         out["auroc_within_state"] = predictions["state"].astype(str).to_numpy()
     return out
 
@@ -168,7 +168,7 @@ def predict_all(checkpoints: dict[str, Path], dataset_dirs: str | Path | list[st
     if len(dirs) > 1:  # before any model runs
         for d in dirs:
             check_spillage_dataset(d)
-        refuse_listed_twice(dirs, "--eval")
+        refuse_listed_twice(dirs, "--held-out")
     merged: pd.DataFrame | None = None
     for name, path in checkpoints.items():
         predictor = load_predictor(path)

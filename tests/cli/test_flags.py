@@ -19,10 +19,10 @@ RETIRED = [
     (["scene", "--seed", "4"], "--seed", "--episode-seed"),
     (["foods", "--seed", "1"], "--seed", "--bowl-seed"),
     (["collect", "c.yaml", "--seed", "1000"], "--seed", "--root-seed"),
-    (["compare-predictors", "a.yaml", "--eval", "h", "--seed", "3"], "--seed", "--bootstrap-seed"),
+    (["compare-predictors", "a.yaml", "--held-out", "h", "--seed", "3"], "--seed", "--bootstrap-seed"),
     (["collect", "c.yaml", "--output", "d"], "--output", "--output-dir"),
     (["report", "run", "--out", "d"], "--out", "--output-dir"),
-    (["compare-predictors", "a.yaml", "--eval", "h", "--out", "d"], "--out", "--output-dir"),
+    (["compare-predictors", "a.yaml", "--held-out", "h", "--out", "d"], "--out", "--output-dir"),
     (["evaluate", "c.yaml", "--fresh"], "--fresh", "--restart"),
     (["train", "policy", "c.yaml", "--fresh"], "--fresh", "--restart"),
     (["train", "bc", "c.yaml", "--fresh"], "--fresh", "--restart"),
@@ -46,9 +46,9 @@ def test_each_seed_has_its_own_name_and_every_writer_and_ray_command_its_flag(ca
     assert _parse(["scene", "--episode-seed", "4"]).episode_seed == 4
     assert _parse(["foods"]).bowl_seed == 0 and _parse(["foods", "--bowl-seed", "2"]).bowl_seed == 2
     assert _parse(["collect", "c.yaml", "--root-seed", "1000"]).root_seed == 1000
-    assert _parse(["compare-predictors", "a.yaml", "--eval", "h", "--bootstrap-seed", "5"]).bootstrap_seed == 5
+    assert _parse(["compare-predictors", "a.yaml", "--held-out", "h", "--bootstrap-seed", "5"]).bootstrap_seed == 5
     for argv in (["collect", "c.yaml"], ["train", "policy", "c.yaml"], ["train", "bc", "c.yaml"], ["train", "predictor", "c.yaml"],
-                 ["evaluate", "c.yaml"], ["report", "run"], ["compare-predictors", "a.yaml", "--eval", "h"]):
+                 ["evaluate", "c.yaml"], ["report", "run"], ["compare-predictors", "a.yaml", "--held-out", "h"]):
         assert _parse([*argv, "--output-dir", "d"]).output_dir == "d", argv
     for argv in (["collect", "c.yaml"], ["evaluate", "c.yaml"], ["sweep", "s.yaml"], ["pipeline", "p.yaml"]):
         assert _parse([*argv, "--address", "10.0.0.1:6379"]).address == "10.0.0.1:6379", argv

@@ -147,15 +147,15 @@ def test_cli_override_file_sets_any_key_and_an_unknown_key_is_one_error(models, 
     records = pd.read_parquet(tmp_path / "run" / "episodes.parquet")
     assert list(records["method"]) == ["rule_based"]
     # repeated, the files merge in order, mappings key by key: the second keeps the first's scoop keys
-    nudge = tmp_path / "nudge.yaml"
-    nudge.write_text(yaml.safe_dump({"scoop": {"action_offset": 0.001}, "output_dir": str(tmp_path / "nudged")}))
+    settle = tmp_path / "settle.yaml"
+    settle.write_text(yaml.safe_dump({"scoop": {"settle_steps": 3}, "output_dir": str(tmp_path / "merged")}))
     again = tmp_path / "again.yaml"
-    again.write_text(yaml.safe_dump({"scoop": {"action_offset_draw": 2}}))
-    assert main(["evaluate", str(base), "--override", str(override), "--override", str(nudge), "--override", str(again),
+    again.write_text(yaml.safe_dump({"scoop": {"min_steps": 12}}))
+    assert main(["evaluate", str(base), "--override", str(override), "--override", str(settle), "--override", str(again),
                  "--serial", "--no-progress"]) == 0
-    nudged = pd.read_parquet(tmp_path / "nudged" / "episodes.parquet")
-    assert list(nudged["method"]) == ["rule_based"] and list(nudged["scoop_action_offset_m"]) == [0.001]
-    assert list(nudged["scoop_action_offset_draw"]) == [2]
+    merged = pd.read_parquet(tmp_path / "merged" / "episodes.parquet")
+    written = yaml.safe_load((tmp_path / "merged" / "config.yaml").read_text())
+    assert list(merged["method"]) == ["rule_based"] and (written["scoop"]["settle_steps"], written["scoop"]["min_steps"]) == (3, 12)
     capsys.readouterr()
     override.write_text("trails: 2\n")
     assert main(["evaluate", str(base), "--override", str(override), "--serial"]) == 2
@@ -221,41 +221,6 @@ def test_the_policy_holds_when_its_own_proposal_holds_whatever_guidance_adds():
     assert not is_still(Chunk(nudged), pose, 0.004)
     assert is_still(Chunk(nudged, unguided_actions=holding), pose, 0.004)
     assert not is_still(Chunk(holding, unguided_actions=nudged), pose, 0.004)
-
-
-def test_an_action_offset_moves_every_executed_scoop_action_rigidly_and_a_run_holds_one_offset(models, tmp_path):
-    """`scoop.action_offset`: the same open-loop scoop (the scripted expert's) runs 3 mm away along one
-    seeded direction; the record says so, and records of another offset are not resumed."""
-    from grits_lab.data.format import read_episode
-    from grits_lab.errors import InputError
-    from grits_lab.policies.control import ScoopSettings
-
-    runs = {}
-    for offset in (0.0, 0.003):
-        config = eval_config(models, tmp_path / f"offset_{offset}", methods=["expert"], rollout_chunks=True,
-                             scoop={"action_offset": offset})
-        row = evaluate(config, progress=False).iloc[0]
-        episode = next((tmp_path / f"offset_{offset}" / "rollout_chunks" / "expert" / "episodes").glob("*.npz"))
-        runs[offset] = (row, read_episode(episode)[0]["trajectory"].astype(np.float64))
-    (plain, plain_actions), (moved, moved_actions) = runs[0.0], runs[0.003]
-    assert plain["scoop_action_offset_m"] == 0.0 and moved["scoop_action_offset_m"] == 0.003
-    assert plain["seed"] == moved["seed"] and len(plain_actions) == len(moved_actions)
-    shift = moved_actions - plain_actions
-    expected = ScoopSettings(action_offset=0.003).offset_vector(int(plain["seed"]))
-    np.testing.assert_allclose(shift, np.broadcast_to(expected, shift.shape), atol=1e-6)  # float32 actions
-    assert math.isclose(np.linalg.norm(expected[:3]), 0.003) and not expected[3:].any()
-    assert not ScoopSettings().offset_vector(int(plain["seed"])).any()
-    assert not np.allclose(ScoopSettings(action_offset=0.003).offset_vector(int(plain["seed"]) + 1), expected)
-    other_draw = ScoopSettings(action_offset=0.003, action_offset_draw=1).offset_vector(int(plain["seed"]))
-    assert math.isclose(np.linalg.norm(other_draw[:3]), 0.003) and not np.allclose(other_draw, expected)
-    with pytest.raises(InputError, match="draw 0"):
-        evaluate(eval_config(models, tmp_path / "offset_0.003", methods=["expert"], rollout_chunks=True,
-                             scoop={"action_offset": 0.003, "action_offset_draw": 1}), progress=False)
-    with pytest.raises(InputError, match="scoop.action_offset"):
-        evaluate(eval_config(models, tmp_path / "offset_0.0", methods=["expert"], rollout_chunks=True,
-                             scoop={"action_offset": 0.001}), progress=False)
-    with pytest.raises(ConfigError, match="scoop.action_offset"):
-        eval_config(models, tmp_path, scoop={"action_offset": -0.001})
 
 
 def test_the_weights_digest_names_the_model_whatever_path_the_checkpoint_stores(models, tmp_path):

@@ -145,7 +145,7 @@ def test_report_videos_need_an_evaluation_run_directory(tmp_path, capsys):
     records.mkdir()
     pd.DataFrame([{"method": "dp", "food": "sago", "level": "low", "task_success": True, "spillage": False,
                    "scoop_failure": False}]).to_parquet(records / "episodes.parquet")
-    assert main(["report", str(records), "--videos", "1"]) == 2
+    assert main(["report", str(records), "--video-episodes", "1"]) == 2
     assert "lacks config.yaml" in capsys.readouterr().err
 
 

@@ -288,7 +288,7 @@ def test_runs_given_together_report_a_method_once_per_guidance_setting(tmp_path,
         assert main(["report", str(protocol), str(other), "--output-dir", str(tmp_path / "x")]) == 2
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and message in err and str(other) in err
-    assert main(["report", str(protocol), str(tuned), "--videos", "1"]) == 2
+    assert main(["report", str(protocol), str(tuned), "--video-episodes", "1"]) == 2
     assert "one run directory" in capsys.readouterr().err
 
 

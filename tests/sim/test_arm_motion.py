@@ -9,7 +9,7 @@ import pytest
 
 from grits_lab.sim import ScoopEnv, SimConfig
 from grits_lab.sim.env import ARM_CLEARANCE, matrix_to_pose9
-from grits_lab.sim.still_spoon import hold_heaped_spoon
+from studies.post_scoop_losses.still_spoon import hold_heaped_spoon
 
 
 def spoon_accelerations(joint_command: str) -> np.ndarray:

@@ -136,10 +136,10 @@ def test_rgb_array_rendering_shows_the_scene_and_no_render_mode_renders_nothing(
         quiet.close()
 
 
-def test_the_env_id_is_versioned_with_the_task_protocol_and_an_older_id_names_it():
-    from grits_lab.versions import PROTOCOL_VERSION
+def test_the_env_id_is_versioned_with_the_env_and_an_older_id_names_it():
+    from grits_lab.versions import ENV_VERSION
 
-    assert ENV_ID == f"grits_lab/Scoop-v{PROTOCOL_VERSION}"
+    assert ENV_ID == f"grits_lab/Scoop-v{ENV_VERSION}"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         with pytest.raises(gymnasium.error.DeprecatedEnv, match=f"use `{ENV_ID}`"):

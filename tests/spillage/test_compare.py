@@ -178,12 +178,12 @@ def test_cli_compares_trained_predictors_and_refuses_an_untrained_one(tmp_path, 
         paths.append(str(path))
     assert main(["train", "predictor", paths[0], "--no-progress"]) == 0
     capsys.readouterr()
-    assert main(["compare-predictors", *paths, "--eval", str(tiny_dataset)]) == 2
+    assert main(["compare-predictors", *paths, "--held-out", str(tiny_dataset)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "traj.yaml" in err[0] and "train it first" in err[0]
     assert main(["train", "predictor", paths[1], "--no-progress"]) == 0
     out = tmp_path / "runs" / f"comparison_{tiny_dataset.name}"  # under the configs' output_dir
-    assert main(["compare-predictors", *paths, "--eval", str(tiny_dataset), "--output-dir", str(tmp_path / "runs"),
+    assert main(["compare-predictors", *paths, "--held-out", str(tiny_dataset), "--output-dir", str(tmp_path / "runs"),
                  "--bootstrap", "200"]) == 0
     summary = json.loads((out / "predictor_comparison.json").read_text())
     # scored by the chunk label: no chunk-position baseline (it ranks by where horizon-label spills fall)
@@ -197,7 +197,7 @@ def test_cli_compares_trained_predictors_and_refuses_an_untrained_one(tmp_path, 
     # Several held-out sets scored as one: each set's chunks as scored alone, its episodes distinct units.
     second = tmp_path / "second"
     shutil.copytree(tiny_dataset, second)
-    assert main(["compare-predictors", *paths, "--eval", str(tiny_dataset), str(second), "--output-dir", str(tmp_path / "runs"),
+    assert main(["compare-predictors", *paths, "--held-out", str(tiny_dataset), str(second), "--output-dir", str(tmp_path / "runs"),
                  "--bootstrap", "200"]) == 0
     both = pd.read_parquet(tmp_path / "runs" / f"comparison_{tiny_dataset.name}+second" / "predictions.parquet")
     assert len(both) == 2 * len(predictions) and both["episode"].nunique() == 2 * predictions["episode"].nunique()
@@ -205,6 +205,6 @@ def test_cli_compares_trained_predictors_and_refuses_an_untrained_one(tmp_path, 
         part = both[both["episode"].str.startswith(f"{d}/")]
         np.testing.assert_allclose(part["p_full"].to_numpy(), predictions["p_full"].to_numpy())
     capsys.readouterr()
-    assert main(["compare-predictors", *paths, "--eval", str(tiny_dataset), str(tiny_dataset) + "/"]) == 2
+    assert main(["compare-predictors", *paths, "--held-out", str(tiny_dataset), str(tiny_dataset) + "/"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--eval lists" in err[0] and "twice" in err[0]
+    assert len(err) == 1 and "--held-out lists" in err[0] and "twice" in err[0]

@@ -122,7 +122,7 @@ def test_cli_trains_evaluates_and_reports_bad_input_in_one_line(tmp_path, tiny_d
         "train": {"epochs": 1, "batch_size": 16, "num_threads": 1},
     }))
     assert main(["train", "predictor", str(cfg_path), "--no-progress", "--dataset", str(tiny_dataset)]) == 0
-    assert main(["train", "predictor", str(cfg_path), "--dataset", str(tiny_dataset), "--eval", str(tiny_dataset)]) == 0
+    assert main(["train", "predictor", str(cfg_path), "--dataset", str(tiny_dataset), "--held-out", str(tiny_dataset)]) == 0
     assert (tmp_path / "runs" / "cli" / "eval_tiny.json").exists()
     capsys.readouterr()
     bad = tmp_path / "bad.yaml"
@@ -255,7 +255,7 @@ def test_a_planted_pickle_is_refused_on_resume_and_by_eval_and_never_runs(tmp_pa
     cfg_path = tmp_path / "p.yaml"
     cfg_path.write_text(yaml.safe_dump(config_to_dict(cfg)))
     capsys.readouterr()
-    assert main(["train", "predictor", str(cfg_path), "--eval", str(tiny_dataset), "--checkpoint", str(last)]) == 2
+    assert main(["train", "predictor", str(cfg_path), "--held-out", str(tiny_dataset), "--checkpoint", str(last)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(last) in err[0] and "refused" in err[0]
     assert not marker.exists()
@@ -327,13 +327,13 @@ def test_cli_scores_either_label_and_compare_needs_one_when_predictors_differ(tm
         }))
         assert main(["train", "predictor", str(path), "--no-progress"]) == 0
         paths.append(str(path))
-    assert main(["train", "predictor", paths[1], "--eval", str(tiny_horizon_dataset), "--label", "horizon"]) == 0
+    assert main(["train", "predictor", paths[1], "--held-out", str(tiny_horizon_dataset), "--label", "horizon"]) == 0
     scored = json.loads((tmp_path / "runs" / "c" / "eval_tiny_horizon_horizon.json").read_text())
     assert (scored["label"], scored["trained_on"]) == ("horizon", "chunk")
     capsys.readouterr()
-    assert main(["compare-predictors", *paths, "--eval", str(tiny_horizon_dataset), "--bootstrap", "100"]) == 2
+    assert main(["compare-predictors", *paths, "--held-out", str(tiny_horizon_dataset), "--bootstrap", "100"]) == 2
     assert "--label" in capsys.readouterr().err
-    assert main(["compare-predictors", *paths, "--eval", str(tiny_horizon_dataset), "--bootstrap", "100", "--label", "horizon"]) == 0
+    assert main(["compare-predictors", *paths, "--held-out", str(tiny_horizon_dataset), "--bootstrap", "100", "--label", "horizon"]) == 0
     table = json.loads((tmp_path / "runs" / "comparison_tiny_horizon_horizon" / "predictor_comparison.json").read_text())
     assert table["label"] == "horizon" and [m["model"] for m in table["models"] if m["kind"] == "model"] == ["h", "c"]
 

@@ -1,4 +1,4 @@
-"""Branch studies: the policy's samples from one state, scored within the state (grits_lab/report/branches.py)."""
+"""Branch studies: the policy's samples from one state, scored within the state (studies/outcome_sensitivity/branches.py)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,11 @@ import pandas as pd
 import pytest
 import yaml
 
-from grits_lab.errors import ConfigError, InputError
+from grits_lab.errors import InputError
 from grits_lab.evaluation.evaluation_run import evaluate
-from grits_lab.report.branches import branch_markdown, branch_predictions, branch_runs, outcome_spread, selection
+from studies.outcome_sensitivity.__main__ import main as study_main
+from studies.outcome_sensitivity.branches import branch_markdown, branch_predictions, branch_runs, outcome_spread, selection
+from studies.outcome_sensitivity.hooks import OutcomeHook
 from tests.evaluation.eval_helpers import eval_config
 
 SCOOP = {"max_steps": 36, "min_steps": 36}
@@ -23,10 +25,10 @@ def study(models, tmp_path_factory) -> dict[str, Path]:
     """Run directories of dp on two episodes: unbranched ("plain"), and draws 0, 1, 2 of plan 1."""
     root = tmp_path_factory.mktemp("branches")
     runs = {}
-    for name, scoop in {"plain": {}, "draw0": {"branch_plan": 1}, "draw1": {"branch_plan": 1, "branch_draw": 1},
-                        "draw2": {"branch_plan": 1, "branch_draw": 2}}.items():
-        config = eval_config(models, root / name, methods=["dp"], rollout_chunks=True, trials=2, scoop={**SCOOP, **scoop})
-        assert (evaluate(config, progress=False)["error"] == "").all()
+    for name, hook in {"plain": None, "draw0": OutcomeHook(branch_plan=1), "draw1": OutcomeHook(branch_plan=1, branch_draw=1),
+                       "draw2": OutcomeHook(branch_plan=1, branch_draw=2)}.items():
+        config = eval_config(models, root / name, methods=["dp"], rollout_chunks=True, trials=2, scoop=SCOOP)
+        assert (evaluate(config, progress=False, hook=hook)["error"] == "").all()
         runs[name] = root / name
     return runs
 
@@ -52,13 +54,14 @@ def test_a_branch_draw_shares_every_step_before_its_plan_and_samples_another_chu
         assert np.abs(other["trajectory"][branch, :3] - own["trajectory"][branch, :3]).max() > 1e-3
     resumed = tmp_path / "draw0"
     shutil.copytree(study["draw0"], resumed)
-    with pytest.raises(InputError, match=r"`scoop.branch_plan` 1 \(draw 0\)"):
-        evaluate(eval_config(models, resumed, methods=["dp"], rollout_chunks=True, trials=2,
-                             scoop={**SCOOP, "branch_plan": 1, "branch_draw": 2}), progress=False)
-    with pytest.raises(ConfigError, match="diffusion-policy method"):
-        eval_config(models, tmp_path, methods=["expert"], scoop={"branch_plan": 0})
-    with pytest.raises(ConfigError, match="scoop.branch_draw"):
-        eval_config(models, tmp_path, scoop={"branch_draw": 1})
+    with pytest.raises(InputError, match="scoop_branch_plan 1, scoop_branch_draw 0, but this run's scoop hook writes"):
+        evaluate(eval_config(models, resumed, methods=["dp"], rollout_chunks=True, trials=2, scoop=SCOOP), progress=False,
+                 hook=OutcomeHook(branch_plan=1, branch_draw=2))
+    with pytest.raises(InputError, match="diffusion-policy methods"):
+        evaluate(eval_config(models, tmp_path / "expert", methods=["expert"]), progress=False, hook=OutcomeHook(branch_plan=0))
+    assert not (tmp_path / "expert").exists()
+    with pytest.raises(InputError, match="needs the plan"):
+        OutcomeHook(branch_draw=1)
 
 
 def test_the_spread_counts_disagreeing_states_and_the_within_state_variance():
@@ -98,7 +101,7 @@ def test_the_best_of_k_samples_is_set_against_the_best_of_k_replays_of_the_own_s
     replays): samples {0, 1}, replays {0, 2}; run 3 counts in `best` only. State a: a sample avoids the
     spill and the replay does not (-1); b: only run 3 avoids it (0 for both bests, 0 for `best`);
     c: draw 0 is safe (0). Mean gap -1/3."""
-    from grits_lab.report.branches import samples_and_replays
+    from studies.outcome_sensitivity.branches import samples_and_replays
 
     frame = pd.DataFrame({"state": np.repeat(["a", "b", "c"], 4), "branch": [0, 1, 2, 3] * 3, "draw": [0, 1, 0, 2] * 3,
                           "offset_m": [0, 0, 0.0005, 0] * 3, "own": [True, False, False, False] * 3,
@@ -141,7 +144,7 @@ def test_branch_runs_are_scored_at_their_plan_within_each_state_and_the_cli_writ
     out = tmp_path / "compared"
     out.mkdir()
     (out / "tiny").symlink_to(checkpoint.parent)  # the trained run, where --output-dir looks for it
-    assert main(["compare-predictors", str(config), "--branches", *map(str, runs), "--label", "chunk", "--bootstrap", "100",
+    assert study_main(["branches", *map(str, runs), "--predictors", str(config), "--label", "chunk", "--bootstrap", "100",
                  "--output-dir", str(out)]) == 0
     written = out / "comparison_branches_test_plan1_draw0+draw1+draw2_dp_chunk"  # the runs' run_id and names
     markdown = (written / "predictor_comparison.md").read_text()
@@ -164,7 +167,7 @@ def test_without_a_model_the_spread_reads_the_same_labels_and_the_cli_writes_own
     columns = ["state", "branch", "draw", "own", "food", "label"]
     pd.testing.assert_frame_equal(alone[columns], scored[columns], check_dtype=False)
     assert alone.attrs["states_left_out"] == [] and set(alone["offset_draw"]) == {0}
-    assert main(["compare-predictors", "--branches", *map(str, runs), "--bootstrap", "100", "--output-dir", str(tmp_path)]) == 0
+    assert study_main(["branches", *map(str, runs), "--bootstrap", "100", "--output-dir", str(tmp_path)]) == 0
     written = tmp_path / "comparison_branches_test_plan1_draw0+draw1+draw2_dp_horizon"
     assert "## The draws of one state (plan 1, horizon label)" in (written / "branch_spread.md").read_text()
     picked = pd.read_csv(written / "branch_selection.csv").set_index("choice")
@@ -174,8 +177,16 @@ def test_without_a_model_the_spread_reads_the_same_labels_and_the_cli_writes_own
     assert picked.loc["random", "rate"] == pytest.approx(by_state.mean().mean())
     assert picked.loc["own", "rate"] == pytest.approx(alone[alone["own"]].sort_values("state")["label"].mean())
     capsys.readouterr()
-    assert main(["compare-predictors", "--eval", str(runs[0])]) == 2
-    assert "give at least one predictor CONFIG" in capsys.readouterr().err
+    assert main(["compare-predictors", "a.yaml", "--eval", str(runs[0])]) == 2
+    assert "--eval is retired; use --held-out" in capsys.readouterr().err
+
+
+def _with_records(run: Path, where: Path, **columns) -> Path:
+    """A copy of a run directory whose records hold other values in `columns`."""
+    shutil.copytree(run, where)
+    records = pd.read_parquet(where / "episodes.parquet").assign(**columns)
+    records.to_parquet(where / "episodes.parquet")
+    return where
 
 
 def _with_config(run: Path, where: Path, section: str, **changes) -> Path:
@@ -194,10 +205,10 @@ def test_branch_runs_that_cannot_be_one_study_are_refused_before_any_model_runs(
     with pytest.raises(InputError, match="listed twice"):
         branch_runs([first, first])
     with pytest.raises(InputError, match="different plans"):
-        branch_runs([first, _with_config(study["draw1"], tmp_path / "plan2", "scoop", branch_plan=2)])
+        branch_runs([first, _with_records(study["draw1"], tmp_path / "plan2", scoop_branch_plan=2)])
     with pytest.raises(InputError, match="transfer.enabled"):
         branch_runs([first, _with_config(study["draw1"], tmp_path / "scoop_only", "transfer", enabled=False)])
-    with pytest.raises(InputError, match="no `scoop.branch_plan`"):
+    with pytest.raises(InputError, match="branch at no plan"):
         branch_runs([first, study["plain"]])
     with pytest.raises(InputError, match="no run is draw 0 without a nudge"):
         branch_runs([study["draw1"], study["draw2"]])
@@ -220,22 +231,24 @@ def test_runs_that_did_not_share_the_state_are_refused_naming_the_episode(study,
         branch_predictions({"tiny": Path(models["predictor"])}, [study["draw0"], second], label="chunk")
 
 
-def test_evaluate_branch_draw_sets_the_draw_and_is_refused_without_a_branch_plan(capsys, tmp_path):
-    """`--branch-draw N` is scoop.branch_draw: on a config without scoop.branch_plan it is one line and
-    exit 2 before anything is written; on the branch study's config it is the draw the run records."""
+def test_the_study_commands_refuse_a_hook_they_cannot_run_before_anything_is_written(capsys, tmp_path):
+    """`branch` on a config with methods that sample no noise, a nudge draw without a nudge, and the
+    retired `evaluate` flags: one line and exit 2, nothing written."""
     from grits_lab.cli import main
     from grits_lab.evaluation.evaluation_config import load_evaluation_config
 
     out = tmp_path / "never"
-    assert main(["evaluate", "experiments/evaluate_quick.yaml", "--branch-draw", "1", "--output-dir", str(out)]) == 2
+    assert study_main(["branch", "experiments/evaluate_quick.yaml", "--plan", "1", "--draw", "1", "--output-dir", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "`scoop.branch_draw` must be 0 unless scoop.branch_plan" in err[0] and not out.exists()
-    study = load_evaluation_config("studies/outcome_sensitivity/configs/dp_branches_brim.yaml", {"scoop": {"branch_draw": 3}})
-    assert (study.scoop.branch_plan, study.scoop.branch_draw, study.transfer.enabled) == (1, 3, False)
-    # --action-offset-draw N is scoop.action_offset_draw, and needs a nudge to draw directions for
-    assert main(["evaluate", "studies/outcome_sensitivity/configs/dp_branches_brim.yaml", "--action-offset-draw", "3", "--output-dir", str(out)]) == 2
+    assert len(err) == 1 and "a branch needs diffusion-policy methods" in err[0] and not out.exists()
+    assert study_main(["nudge", "experiments/evaluate_quick.yaml", "--offset", "0", "--draw", "3", "--output-dir", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "`scoop.action_offset_draw` must be 0 unless scoop.action_offset" in err[0] and not out.exists()
+    assert len(err) == 1 and "a nudge draw needs a nudge" in err[0] and not out.exists()
+    for flag in ("--branch-draw", "--action-offset-draw"):
+        assert main(["evaluate", "experiments/evaluate_quick.yaml", flag, "1", "--output-dir", str(out)]) == 2
+        assert "is retired; use `python -m studies.outcome_sensitivity" in capsys.readouterr().err and not out.exists()
+    study = load_evaluation_config("studies/outcome_sensitivity/configs/dp_branches_brim.yaml")
+    assert study.methods == ["dp"] and study.transfer.enabled is False
 
 
 def test_a_nudged_replay_shares_the_state_and_the_sample_and_moves_only_from_the_branch_plan(study, models, tmp_path, capsys):
@@ -243,18 +256,15 @@ def test_a_nudged_replay_shares_the_state_and_the_sample_and_moves_only_from_the
     chunk is draw 0's, the branch chunk is draw 0's sample moved by the offset; the study takes it as
     another run of the same state, and refuses it twice."""
     offset = 0.003
-    config = eval_config(models, tmp_path / "nudged", methods=["dp"], rollout_chunks=True, trials=2,
-                         scoop={**SCOOP, "branch_plan": 1, "action_offset": offset})
-    records = evaluate(config, progress=False)
+    config = eval_config(models, tmp_path / "nudged", methods=["dp"], rollout_chunks=True, trials=2, scoop=SCOOP)
+    records = evaluate(config, progress=False, hook=OutcomeHook(offset=offset, branch_plan=1))
     assert set(records["scoop_action_offset_m"]) == {offset} and set(records["scoop_branch_draw"]) == {0}
-    from grits_lab.policies.control import ScoopSettings
-
     seeds = records.sort_values("trial")["seed"].astype(int)  # episode files sort by trial, as records do
     for own, nudged, seed in zip(_episodes(study["draw0"]), _episodes(tmp_path / "nudged"), seeds):
         np.testing.assert_array_equal(nudged["trajectory"][:12], own["trajectory"][:12])
         np.testing.assert_array_equal(nudged["chunk_cloud"][1], own["chunk_cloud"][1])
         shift = nudged["trajectory"][12:24].astype(np.float64) - own["trajectory"][12:24]  # the same sample, moved
-        expected = ScoopSettings(action_offset=offset).offset_vector(seed)
+        expected = OutcomeHook(offset=offset).offset_vector(seed)
         np.testing.assert_allclose(shift, np.broadcast_to(expected, shift.shape), atol=1e-6)
     runs = branch_runs([study["draw0"], tmp_path / "nudged", study["draw1"]])
     assert [r.own for r in runs] == [True, False, False] and runs[1].key == (0, offset, 0)
@@ -262,14 +272,14 @@ def test_a_nudged_replay_shares_the_state_and_the_sample_and_moves_only_from_the
     assert list(frame.groupby("state")["own"].sum()) == [1, 1]
     with pytest.raises(InputError, match="listed twice"):
         branch_runs([study["draw0"], tmp_path / "nudged", tmp_path / "nudged"])
-    from grits_lab.cli import main
-
-    # `--action-offset-draw 3` on the run's own config: the records' draw 0 is not resumed as draw 3
-    assert main(["evaluate", str(tmp_path / "nudged" / "config.yaml"), "--action-offset-draw", "3", "--serial"]) == 2
-    assert "0.003 m (draw 0), but the config sets 0.003 m (draw 3)" in capsys.readouterr().err
+    # another nudge draw on the run's own config: the records' draw 0 is not resumed as draw 3
+    assert study_main(["branch", str(tmp_path / "nudged" / "config.yaml"), "--plan", "1", "--offset", str(offset),
+                       "--offset-draw", "3", "--serial"]) == 2
+    err = capsys.readouterr().err
+    assert "scoop_action_offset_draw 0, scoop_branch_plan 1" in err and "scoop_action_offset_draw 3" in err
 
     # draws 0 and 1 beside draw 0 and its replay: the best of two samples against the best of two replays
-    assert main(["compare-predictors", "--branches", str(study["draw0"]), str(tmp_path / "nudged"), str(study["draw1"]),
+    assert study_main(["branches", str(study["draw0"]), str(tmp_path / "nudged"), str(study["draw1"]),
                  "--bootstrap", "100", "--output-dir", str(tmp_path / "spread")]) == 0
     written = tmp_path / "spread" / "comparison_branches_test_plan1_draw0+nudged+draw1_dp_horizon"
     picked = pd.read_csv(written / "branch_selection.csv").set_index("choice")
@@ -283,21 +293,17 @@ def test_a_nudged_replay_shares_the_state_and_the_sample_and_moves_only_from_the
 
 
 def test_a_second_study_whose_runs_have_the_same_names_does_not_overwrite_the_first_comparison(study, tmp_path, capsys):
-    import shutil
-
-    from grits_lab.cli import main
-
     other = tmp_path / "other_study"
     for name in ("draw0", "draw1"):
         shutil.copytree(study[name], other / name)
     first = [str(study["draw0"]), str(study["draw1"])]
-    assert main(["compare-predictors", "--branches", *first, "--bootstrap", "100", "--output-dir", str(tmp_path / "cmp")]) == 0
+    assert study_main(["branches", *first, "--bootstrap", "100", "--output-dir", str(tmp_path / "cmp")]) == 0
     written = tmp_path / "cmp" / "comparison_branches_test_plan1_draw0+draw1_dp_horizon"
     kept = (written / "branch_selection.csv").read_text()
     capsys.readouterr()
     second = [str(other / "draw0"), str(other / "draw1")]
-    assert main(["compare-predictors", "--branches", *second, "--bootstrap", "100", "--output-dir", str(tmp_path / "cmp")]) == 2
+    assert study_main(["branches", *second, "--bootstrap", "100", "--output-dir", str(tmp_path / "cmp")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{written} holds the comparison of the runs {study['draw0'].resolve()}" in err[0], err
     assert (written / "branch_selection.csv").read_text() == kept
-    assert main(["compare-predictors", "--branches", *first, "--bootstrap", "100", "--output-dir", str(tmp_path / "cmp")]) == 0  # the same runs again
+    assert study_main(["branches", *first, "--bootstrap", "100", "--output-dir", str(tmp_path / "cmp")]) == 0  # the same runs again

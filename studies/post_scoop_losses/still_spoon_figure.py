@@ -1,8 +1,8 @@
 """Does a heaped spoon held still keep its heap? The arm at the scoop's 30 solver iterations, the
-spoon made static, and the arm at the transfer's 100 (grits_lab/sim/still_spoon.py).
+spoon made static, and the arm at the transfer's 100 (studies/post_scoop_losses/still_spoon.py).
 
-    python examples/still_spoon.py                     # 6 foods x 2 seeds x 3 settings, ~6 min on 2 cores
-    python examples/still_spoon.py --foods red_bean:high --seeds 1
+    python studies/post_scoop_losses/still_spoon_figure.py                     # 6 foods x 2 seeds x 3 settings, ~6 min on 2 cores
+    python studies/post_scoop_losses/still_spoon_figure.py --foods red_bean:high --seeds 1
 
 Writes still_spoon.csv (one row per food, level, seed and setting) and still_spoon.png (grains
 that moved more than 1 mm and more than 1 cm in 4 s, per setting) to --output-dir.
@@ -21,7 +21,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from grits_lab.sim.still_spoon import hold_heaped_spoon  # noqa: E402
+from studies.post_scoop_losses.still_spoon import hold_heaped_spoon  # noqa: E402
 from grits_lab.task.transfer_settings import TransferSettings  # noqa: E402
 
 SETTINGS = {  # label: (holder, solver iterations; None = the scoop's)

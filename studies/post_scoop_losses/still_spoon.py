@@ -5,7 +5,7 @@ expert's nominal scoop, then the spoon lifted 10 cm straight up), holds it still
 each grain's displacement in the spoon's frame, with the arm holding the spoon at a given number
 of solver iterations or with the spoon made static (the arm's constraint removed, the spoon's
 mass set to zero), which isolates the arm-spoon chain. docs/evaluation.md, "Grains a still spoon
-loses", gives the measurement; examples/still_spoon.py draws it for several foods.
+loses", gives the measurement; studies/post_scoop_losses/still_spoon_figure.py draws it for several foods.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The AUROC ceiling of an outcome whose chance part a nudge reveals (grits_lab/report/outcome_ceiling.py)."""
+"""The AUROC ceiling of an outcome whose chance part a nudge reveals (studies/outcome_sensitivity/ceiling.py)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from grits_lab.report.outcome_ceiling import max_auroc, rate_and_noise, repeatability
+from studies.outcome_sensitivity.ceiling import max_auroc, rate_and_noise, repeatability
 
 
 def _auroc_of_mix(values: np.ndarray, weights: np.ndarray) -> float:

@@ -1,13 +1,13 @@
 """Guides scored where guidance acts: the policy's other samples from one and the same state.
 
-Runs of `grits-lab evaluate` on the same seeds that differ only in `scoop.branch_draw` (with one
-`scoop.branch_plan` k; docs/evaluation.md, "Branches from one state") share every step of an
+Runs of `python -m studies.outcome_sensitivity branch` on the same seeds that differ only in the draw (with one
+plan k, hooks.py; docs/evaluation.md, "Branches from one state") share every step of an
 episode up to plan k and then execute another sample of the policy there. The chunk each run
 executes at plan k is one of the policy's alternatives from that state, and its label says what
 that choice led to. Guidance picks among (and moves) such samples, so what a guide must do is rank
 them within a state; the pooled AUROC also credits knowing which states spill.
 
-A run with `scoop.action_offset` as well replays its draw's sample nudged from the branch plan
+A run with a nudge (--offset) as well replays its draw's sample nudged from the branch plan
 on, by a distance no observation resolves: draw 0 and such replays of it are K outcomes of one
 sample from one state, whose spread is the chance part no guide can rank (docs/evaluation.md,
 "Branches from one state").
@@ -40,8 +40,8 @@ class BranchRun:
     plan: int
     draw: int
     delivers: bool  # the run played the transfer and pour (its horizon label runs to delivery, else to the scoop's end)
-    offset_m: float = 0.0  # scoop.action_offset from the branch plan on (0: not nudged)
-    offset_draw: int = 0  # scoop.action_offset_draw (0 when not nudged)
+    offset_m: float = 0.0  # the nudge from the branch plan on, metres (0: not nudged)
+    offset_draw: int = 0  # the nudge's draw (0 when not nudged)
 
     @property
     def key(self) -> tuple[int, float, int]:
@@ -55,11 +55,11 @@ class BranchRun:
 
 def branch_runs(runs: list[str | Path], method: str = "dp") -> list[BranchRun]:
     """The runs of one branch study, in the order given. InputError, before any model runs, for
-    fewer than two runs, a run without `scoop.branch_plan` in its config.yaml or without
+    fewer than two runs, a run without a branch plan (`_hook_settings`) or without
     rollout chunks of `method`, runs that branch at different plans or whose horizons end at
     different stages (`transfer.enabled`), a draw listed twice, or no draw 0."""
     if len(runs) < 2:
-        raise InputError(f"--branches needs at least two runs of one branch plan (got {len(runs)})")
+        raise InputError(f"`branches` needs at least two runs of one branch plan (got {len(runs)})")
     from grits_lab.evaluation.evaluation_run import ROLLOUT_CHUNKS_DIR
 
     out = []
@@ -68,16 +68,15 @@ def branch_runs(runs: list[str | Path], method: str = "dp") -> list[BranchRun]:
         if not config.is_file():
             raise InputError(f"{run}: no config.yaml; give run directories of `grits-lab evaluate`")
         data = yaml.safe_load(config.read_text()) or {}
-        scoop = data.get("scoop") or {}
-        if scoop.get("branch_plan") is None:
-            raise InputError(f"{run}: its config sets no `scoop.branch_plan`; a branch study's runs branch at one plan")
+        plan, draw, offset, offset_draw = _hook_settings(run, data)
+        if plan < 0:
+            raise InputError(f"{run}: its episodes branch at no plan; a branch study's runs branch at one plan "
+                             "(`python -m studies.outcome_sensitivity branch ... --plan K`)")
         dataset = run / ROLLOUT_CHUNKS_DIR / method
         if not dataset.is_dir():
             raise InputError(f"{run}: no rollout chunks of method {method!r} at {dataset} (evaluate with rollout_chunks: true)")
         delivers = bool((data.get("transfer") or {}).get("enabled", True))
-        offset = float(scoop.get("action_offset", 0.0) or 0.0)
-        out.append(BranchRun(run, dataset, int(scoop["branch_plan"]), int(scoop.get("branch_draw", 0)), delivers, offset,
-                             int(scoop.get("action_offset_draw", 0)) if offset else 0))
+        out.append(BranchRun(run, dataset, plan, draw, delivers, offset, offset_draw if offset else 0))
     if len({r.plan for r in out}) > 1:
         raise InputError("the runs branch at different plans: " + ", ".join(f"{r.path} at {r.plan}" for r in out))
     if len({r.delivers for r in out}) > 1:
@@ -85,12 +84,31 @@ def branch_runs(runs: list[str | Path], method: str = "dp") -> list[BranchRun]:
                          "at different points: " + ", ".join(f"{r.path}: {r.delivers}" for r in out))
     keys = [r.key for r in out]
     if len(set(keys)) < len(keys):
-        raise InputError("a branch draw is listed twice (draw, action_offset, action_offset_draw): "
+        raise InputError("a branch draw is listed twice (draw, nudge, nudge draw): "
                          + ", ".join(f"{r.path}: {r.key}" for r in out))
     if not any(r.own for r in out):
         raise InputError(f"no run is draw 0 without a nudge, the policy's own episode, which the picks are compared with "
-                         f"(draw, action_offset, action_offset_draw: {keys})")
+                         f"(draw, nudge, nudge draw: {keys})")
     return out
+
+
+def _hook_settings(run: Path, data: dict) -> tuple[int, int, float, int]:
+    """(branch plan, -1: none; branch draw; nudge in metres; nudge draw) of a run: from its config.yaml's
+    `scoop` block where runs made before the hook wrote them there, else from its records' hook
+    columns (`OutcomeHook.record_columns`; a run holds one setting)."""
+    scoop = data.get("scoop") or {}
+    if scoop.get("branch_plan") is not None:
+        return (int(scoop["branch_plan"]), int(scoop.get("branch_draw", 0)), float(scoop.get("action_offset", 0.0) or 0.0),
+                int(scoop.get("action_offset_draw", 0)))
+    records = run / "episodes.parquet"
+    if not records.is_file():
+        return (-1, 0, 0.0, 0)
+    frame = pd.read_parquet(records)
+    columns = ("scoop_branch_plan", "scoop_branch_draw", "scoop_action_offset_m", "scoop_action_offset_draw")
+    if frame.empty or any(c not in frame.columns for c in columns):
+        return (-1, 0, 0.0, 0)
+    first = frame.iloc[0]
+    return (int(first[columns[0]]), int(first[columns[1]]), float(first[columns[2]]), int(first[columns[3]]))
 
 
 def branch_predictions(checkpoints: dict[str, Path], runs: list[str | Path], method: str = "dp", label: str = "horizon") -> pd.DataFrame:
@@ -168,9 +186,9 @@ def outcome_spread(frame: pd.DataFrame) -> dict[str, Any]:
     the share of the label's variance m (1 - m) that lies within states (law of total variance,
     mean of s (K - s) / K^2 over it: what a guide that sees the trajectory could rank and the state
     alone cannot), and `ceiling_state_only`: the best AUROC any score of the state alone can reach
-    (grits_lab/report/outcome_ceiling.py, with v = within).
+    (studies/outcome_sensitivity/ceiling.py, with v = within).
     """
-    from grits_lab.report.outcome_ceiling import max_auroc
+    from studies.outcome_sensitivity.ceiling import max_auroc
 
     grouped = frame.groupby("state")["label"]
     s, k = grouped.sum().to_numpy(dtype=np.float64), grouped.size().to_numpy(dtype=np.float64)

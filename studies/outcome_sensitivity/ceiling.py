@@ -1,7 +1,7 @@
 """How well any predictor could rank an outcome that a sub-millimetre nudge changes: the AUROC ceiling.
 
 Two runs on the same seeds, the second with every scoop action offset by a distance no observation
-resolves (`scoop.action_offset`, docs/evaluation.md "Outcome sensitivity"), give each episode two
+resolves (the nudge, studies/outcome_sensitivity/hooks.py), give each episode two
 draws of a binary outcome y from the same observations. Take an episode's outcome as a coin with
 its own chance p of coming up 1, the pair as two tosses of that coin. Then
 
@@ -30,7 +30,7 @@ import functools
 import numpy as np
 import pandas as pd
 
-CEILING_OUTCOMES = ("spillage", "spill_before_pour", "task_success")  # of run_compare.PAIRED_OUTCOMES
+from grits_lab.report.run_compare import CEILING_OUTCOMES
 
 
 def max_auroc(rate: float, noise: float, *, grid: int = 21, starts: int = 4, seed: int = 0) -> float:
@@ -96,3 +96,22 @@ def repeatability(pairs: pd.DataFrame, *, outcomes: tuple[str, ...] = CEILING_OU
                          "changed": int((a != b).sum()), "changed_fraction": float((a != b).mean()),
                          "auroc_ceiling": max_auroc(rate, noise), "auroc_ceiling_low": float(low), "auroc_ceiling_high": float(high)})
     return pd.DataFrame(rows)
+
+
+def ceiling_columns(declared: bool = False):
+    """The `per_method` callable of grits_lab.report.run_compare.compare_runs that adds each outcome's
+    AUROC ceiling (`repeatability`) to a method's row when its runs differ by a nudge (offset or
+    draw), when every pair ran on other CPU kernels, or always with `declared` (the caller declares
+    the runs two draws of one chance that the records do not name): each outcome's changes are then
+    its chance part. The row gets `ceiling_declared` either way."""
+
+    def columns(pairs: pd.DataFrame, row: dict) -> dict:
+        out: dict = {"ceiling_declared": bool(declared)}
+        nudged_apart = (row["action_offset_before_m"] != row["action_offset_after_m"]
+                        or row["action_offset_before_m"] > 0 and row["action_offset_draw_before"] != row["action_offset_draw_after"])
+        if len(pairs) and (nudged_apart or row["kernels_differ"] == len(pairs) or declared):
+            for _, c in repeatability(pairs).iterrows():
+                out.update({f"{c['outcome']}_{k}": c[k] for k in ("auroc_ceiling", "auroc_ceiling_low", "auroc_ceiling_high")})
+        return out
+
+    return columns

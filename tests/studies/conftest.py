@@ -1,0 +1,3 @@
+"""The studies' tests use the evaluation tests' tiny checkpoints."""
+
+from tests.evaluation.conftest import models, recorded_run  # noqa: F401
