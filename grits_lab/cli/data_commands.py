@@ -1,10 +1,11 @@
-"""`grits-lab collect CONFIG` and `grits-lab dataset info PATH`: dataset generation and inspection."""
+"""`grits-lab collect CONFIG`, `grits-lab dataset info PATH` and `dataset export`: dataset generation, inspection, export."""
 
 from __future__ import annotations
 
 import argparse
 from typing import Any
 
+from grits_lab.cli import dataset_export
 from grits_lab.cli.flags import NO_PROGRESS_HELP, retire
 from grits_lab.io import to_json
 
@@ -27,12 +28,13 @@ def register(subparsers: Any) -> None:
     retire(collect, "--seed", "--root-seed")
     collect.set_defaults(handler=_collect)
 
-    dataset = subparsers.add_parser("dataset", help="inspect datasets")
+    dataset = subparsers.add_parser("dataset", help="inspect and export datasets")
     dataset_sub = dataset.add_subparsers(dest="dataset_command", metavar="ACTION")
     info = dataset_sub.add_parser("info", help="counts by food, shape and label; size on disk")
     info.add_argument("path", help="dataset directory")
     info.add_argument("--json", action="store_true", help="print JSON instead of text")
     info.set_defaults(handler=_info)
+    dataset_export.register(dataset_sub)
     dataset.set_defaults(handler=lambda args: (dataset.print_help(), 2)[1])
 
 

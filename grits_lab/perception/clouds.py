@@ -8,6 +8,7 @@ row, 0-based) at depth z is the camera point ((u - cx) z / fx, (v - cy) z / fy, 
 
 from __future__ import annotations
 
+import functools
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
@@ -92,10 +93,65 @@ def farthest_point_sample(points: np.ndarray, n: int, seed: int = 0, fallback: S
         return np.repeat(where[None], n, axis=0).astype(np.float32)
     rng = make_rng(seed)
     if m > n:
-        import open3d as o3d
-
-        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-        points = np.asarray(cloud.farthest_point_down_sample(int(n), int(rng.integers(0, m))).points)
+        points = points[farthest_point_indices(points, int(n), int(rng.integers(0, m)))]
         m = len(points)
     extra = points[rng.integers(0, m, size=n - m)]
     return np.concatenate([points, extra]).astype(np.float32)
+
+
+def farthest_point_indices(points: np.ndarray, n: int, start: int) -> np.ndarray:
+    """Ascending indices of the `n` points of `points` (M, 3) float64 chosen by farthest-point sampling.
+
+    From `start`, each next point is the one whose squared distance to the chosen set is largest
+    (the first such index on a tie); the squared distance is summed x, y, z in that order, in
+    float64. When every remaining distance is 0 (repeated points) the last choice repeats, so
+    fewer than `n` indices come back. This is open3d's `PointCloud.farthest_point_down_sample`
+    (open3d 0.17 to 0.20: same picks, returned in index order), written in numpy so that a plain
+    install needs no open3d; with the `open3d` extra installed, open3d's C++ loop gives the same
+    indices several times faster (tests/perception/test_clouds.py compares the two).
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if _open3d() is not None:
+        return _open3d_indices(points, n, start)
+    return _numpy_indices(points, n, start)
+
+
+@functools.cache
+def _open3d():
+    try:
+        import open3d
+    except ImportError:  # not installed, or its system library (libusb-1.0-0) is missing
+        return None
+    return open3d
+
+
+def _open3d_indices(points: np.ndarray, n: int, start: int) -> np.ndarray:
+    o3d = _open3d()
+    tagged = np.concatenate([points, np.arange(len(points), dtype=np.float64)[:, None]], axis=1)
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    cloud.normals = o3d.utility.Vector3dVector(np.repeat(tagged[:, 3:], 3, axis=1))  # carries each point's index
+    chosen = np.asarray(cloud.farthest_point_down_sample(n, start).normals)[:, 0]
+    return chosen.astype(np.int64)
+
+
+def _numpy_indices(points: np.ndarray, n: int, start: int) -> np.ndarray:
+    axes = [np.ascontiguousarray(points[:, k]) for k in range(3)]
+    m = len(points)
+    nearest = np.full(m, np.inf)  # squared distance of each point to the chosen set
+    delta, squared = np.empty(m), np.empty(m)
+    chosen = np.empty(n, dtype=np.int64)
+    current = start
+    for i in range(n):
+        chosen[i] = current
+        for k, axis in enumerate(axes):
+            np.subtract(axis, axis[current], out=delta)
+            np.multiply(delta, delta, out=delta)
+            if k == 0:
+                squared[:] = delta
+            else:
+                np.add(squared, delta, out=squared)
+        np.minimum(nearest, squared, out=nearest)
+        best = int(np.argmax(nearest))
+        if nearest[best] > 0:
+            current = best
+    return np.unique(chosen)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
@@ -33,6 +33,7 @@ from grits_lab.training import (
     EMA, MetricLogger, load_checkpoint, require_finite_loss, resolve_device, save_checkpoint, set_torch_threads,
     warmup_cosine,
 )
+from grits_lab.training.metrics_log import TrackingConfig
 from grits_lab.training.data_parallel import batch_share, reduce_gradients, run_processes
 from grits_lab.versions import PROTOCOL, cpu_kernels
 
@@ -64,6 +65,7 @@ class DemoTrainConfig:
     val_batches: int = 8
     checkpoint_every: int = 500
     keep_every: int = 0  # also keep step_<N>.pt every N steps (0 = only last.pt)
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)  # MLflow besides metrics.csv (grits_lab/training/metrics_log.py)
 
     def __post_init__(self) -> None:
         require(self.batch_size >= 1, "batch_size", self.batch_size, "at least 1")
@@ -234,7 +236,8 @@ def _train(
         train_set_ids = set(train_ids)
         pairs = [(r.food, r.level) for r in load_index(config.dataset).itertuples() if r.episode_id in train_set_ids]
         player = rollouts(rollout, rollout_episodes(pairs, rollout.episodes, config.seed))  # type: ignore[misc]
-    logger = MetricLogger(out, resume_step=step, title=f"{desc} {Path(out).name}") if lead else None
+    logger = MetricLogger(out, namespace=desc.removeprefix("train "), resume_step=step, title=f"{desc} {Path(out).name}",
+                          tracking=config.tracking, params=config_to_dict(config)) if lead else None
     first_loss = last_loss = float("nan")
     window: list[float] = []
     started = time.perf_counter()

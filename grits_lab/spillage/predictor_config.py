@@ -14,6 +14,7 @@ from typing import Literal
 
 from grits_lab.config import require
 from grits_lab.data.chunk_labels import Label
+from grits_lab.training.metrics_log import TrackingConfig
 
 Encoder = Literal["dp3", "pointnet2"]
 # "trajectory_and_cloud" is GRITS; the other two are the baselines of the evidence.
@@ -155,6 +156,7 @@ class PredictorTrainConfig:
     num_threads: int = 2
     select_metric: Literal["val_loss", "val_auroc"] = "val_loss"
     ece_bins: int = 10
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)  # MLflow besides metrics.csv (grits_lab/training/metrics_log.py)
 
     def __post_init__(self) -> None:
         require(self.epochs > 0, "train.epochs", self.epochs, "positive")

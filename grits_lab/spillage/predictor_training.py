@@ -44,6 +44,7 @@ def _resume_fingerprint(config: PredictorConfig) -> str:
     """Fingerprint of everything that must match to resume (`train.epochs` may grow: train longer)."""
     described = config_to_dict(config)
     del described["train"]["epochs"]
+    del described["train"]["tracking"]  # where the metrics are shown, not what is trained
     if described["data"]["label"] == "chunk":  # the only label before the key existed: those runs still resume
         del described["data"]["label"]
     return config_fingerprint(described)
@@ -134,7 +135,8 @@ def _train_in(out: Path, config: PredictorConfig, dataset_dir: Path, split: Epis
     val_set = SpillageChunkDataset(dataset_dir, split.val, shuffle=False, **common)
     n_train = len(train_set.labels())
 
-    logger = MetricLogger(out, resume_step=start_epoch, title=f"predictor {out.name}")  # one step per epoch
+    logger = MetricLogger(out, namespace="predictor", resume_step=start_epoch, title=f"predictor {out.name}",  # one step per epoch
+                          tracking=config.train.tracking, params=config_to_dict(config))
     for epoch in range(start_epoch, config.train.epochs):
         torch.manual_seed(derive_seed(config.train.seed, "dropout", epoch))
         train_set.set_epoch(epoch)

@@ -94,6 +94,35 @@ def test_fps_drops_non_finite_points():
     np.testing.assert_array_equal(nothing_finite, np.tile([1, 2, 3], (8, 1)))
 
 
+def test_numpy_farthest_point_sampling_picks_what_open3d_picks():
+    """The numpy loop a plain install runs and open3d's C++ one choose the same indices, ties and
+    repeated points included, on clouds like the cameras' (many points, few centimetres) and others."""
+    pytest.importorskip("open3d", reason="the open3d extra is not installed: nothing to compare the numpy sampler with")
+    from grits_lab.perception.clouds import _numpy_indices, _open3d_indices
+
+    rng = np.random.default_rng(0)
+    for case in range(60):
+        m = int(rng.integers(2, 3000))
+        points = rng.normal(size=(m, 3)) * rng.uniform(0.005, 0.5) + rng.uniform(-1, 1, 3)
+        if case % 3 == 0:
+            points = np.round(points, 2)  # equal distances (ties) and repeated points
+        n, start = int(rng.integers(1, m + 1)), int(rng.integers(0, m))
+        want = _open3d_indices(points, n, start)
+        np.testing.assert_array_equal(_numpy_indices(points, n, start), want, err_msg=f"case {case}: m {m}, n {n}")
+
+
+def test_farthest_point_sampling_is_the_same_with_and_without_open3d(monkeypatch):
+    from grits_lab.perception import clouds
+
+    pts = np.random.default_rng(4).uniform(-0.05, 0.05, (4000, 3))
+    found = farthest_point_sample(pts, 256, seed=9)
+    monkeypatch.setattr(clouds, "_open3d", lambda: None)
+    np.testing.assert_array_equal(farthest_point_sample(pts, 256, seed=9), found)
+    # open3d's rule on repeats: once every remaining point is at distance 0 the last pick repeats
+    repeated = np.array([[0.0, 0, 0], [1, 0, 0], [1, 0, 0], [0, 0, 0]])
+    np.testing.assert_array_equal(clouds.farthest_point_indices(repeated, 4, 0), [0, 1])
+
+
 def test_depth_noise_grows_with_range_and_drops_pixels():
     cfg = DepthNoiseConfig(lateral_px=0.0, edge_dropout=0.0, random_dropout=0.05)
     near = np.full((200, 200), 0.5, np.float32)

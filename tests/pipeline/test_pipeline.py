@@ -182,7 +182,7 @@ def test_the_report_stage_shows_every_training_runs_curves(tmp_path):
 
     layout = Layout(tmp_path / "pipe")
     for run_dir in (layout.policy_dir, layout.bc_dir, layout.predictor_dir("predictor")):
-        logger = MetricLogger(run_dir, tensorboard=False)
+        logger = MetricLogger(run_dir, namespace="policy", tensorboard=False)
         logger.log(1, {"train_loss": 0.5, "lr": 1e-3, "val_loss": 0.6})
         logger.close()
     layout.evaluate_dir.mkdir(parents=True)

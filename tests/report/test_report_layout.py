@@ -239,7 +239,7 @@ def test_the_training_section_shows_each_runs_curves_and_last_values(tmp_path):
     plausible_run(0).to_parquet(tmp_path / "episodes.parquet", index=False)
     for name, metrics in {"policy": {"train_loss": 0.5, "lr": 1e-4, "val_loss": 0.6},
                           "predictor/predictor": {"train_loss": 0.4, "lr": 1e-3, "val_auroc": 0.74}}.items():
-        logger = MetricLogger(tmp_path / "train" / name, tensorboard=False)
+        logger = MetricLogger(tmp_path / "train" / name, namespace=name.split("/")[0], tensorboard=False)
         logger.log(1, metrics)
         logger.close()
     result = build_report(tmp_path, tmp_path / "report", training=[tmp_path / "train" / "policy", tmp_path / "train" / "predictor"])

@@ -1,5 +1,6 @@
 """A real Ray cluster: `ray start --head` in a subprocess, then a job connects through `address:` as a user would."""
 
+import contextlib
 import os
 import signal
 import socket
@@ -8,6 +9,8 @@ import sys
 import time
 
 import pytest
+
+from tests.tune.conftest import postgres_url, sweep_file  # noqa: F401  (fixtures of the sweep tests)
 
 pytestmark = [pytest.mark.cluster, pytest.mark.ray]
 
@@ -148,14 +151,21 @@ except GritsError as exc:
 CLUSTER_DOC = os.path.join(os.path.dirname(__file__), "..", "..", "docs", "cluster.md")
 
 
+def _doc_block():
+    return open(CLUSTER_DOC).read().split("## Scaling out", 1)[1].split("```bash", 1)[1].split("```", 1)[0]
+
+
+def _commands(lines):
+    return [line.split("#", 1)[0].strip() for line in lines if line.split("#", 1)[0].strip()]
+
+
 def _cluster_steps():
     """docs/cluster.md's "Scaling out" step 1 (commands) and step 2's environment, as a user reads them."""
-    text = open(CLUSTER_DOC).read().split("## Scaling out", 1)[1].split("```bash", 1)[1].split("```", 1)[0]
+    text = _doc_block()
     step1 = text.split("# 1.", 1)[1].split("# 2.", 1)[0].splitlines()[1:]
-    commands = [line.split("#", 1)[0].strip() for line in step1 if line.split("#", 1)[0].strip()]
     exports = [line for line in text.split("# 2.", 1)[1].splitlines() if line.startswith("export ")]
     env = dict(item.split("=", 1) for line in exports for item in line.split()[1:])
-    return commands, env
+    return _commands(step1), env
 
 
 def _wait_for_cpus(address, env, cpus, timeout_s=120):
@@ -174,33 +184,43 @@ def _wait_for_cpus(address, env, cpus, timeout_s=120):
     assert proc.returncode == 0 and float(shown[0]) >= cpus, f"the cluster shows {shown[0]} CPUs, not {cpus}\n{proc.stderr[-2000:]}"
 
 
-@pytest.fixture
-def two_nodes(tmp_path):
-    """A head and a worker node on this machine, started with the step-1 commands of docs/cluster.md as written
-    (the head given a free port, 1 CPU, its own temp dir; the worker 2 CPUs). Yields (address, env, worker pgid)."""
+@contextlib.contextmanager
+def _documented_nodes():
+    """A head and a worker node on this machine, started with the step-1 commands of docs/cluster.md as written,
+    from a fresh HOME (no ~/.ray/auth_token, no earlier run): the head given a free port, 1 CPU and its own temp
+    dir, the worker 2 CPUs. Yields a namespace: address, env (step 2's exports applied), home, the head's and the
+    worker's process groups, and the log of every command run."""
     import tempfile
+    from types import SimpleNamespace
 
     commands, env_vars = _cluster_steps()
     port = _free_port()
     temp_dir = tempfile.mkdtemp(prefix="rn", dir="/tmp")  # short: Ray's socket paths must fit 107 bytes
-    groups, env = [], dict(os.environ, RAY_USAGE_STATS_ENABLED="0")
+    home = tempfile.mkdtemp(prefix="home", dir="/tmp")
+    groups, log = {}, []
+    env = dict(os.environ, RAY_USAGE_STATS_ENABLED="0", HOME=home)
     env.pop("RAY_AUTH_MODE", None)  # the doc's lines say where it is needed
+    env.pop("RAY_AUTH_TOKEN", None)
     try:
         for command in commands:
             line = command.replace("HEAD_IP", "127.0.0.1").replace("6379", str(port))
+            role = None
             if "--head" in line:
-                line += f" --num-cpus=1 --include-dashboard=false --disable-usage-stats --temp-dir={temp_dir}"
+                line, role = line + f" --num-cpus=1 --include-dashboard=false --disable-usage-stats --temp-dir={temp_dir}", "head"
             elif "ray start" in line:
-                line += " --num-cpus=2 --disable-usage-stats"
+                line, role = line + " --num-cpus=2 --disable-usage-stats", "worker"
             proc = subprocess.Popen(["bash", "-c", line], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
             out, _ = proc.communicate(timeout=120)
-            groups.append(proc.pid)
+            groups[role or f"step{len(log)}"] = proc.pid
+            shown = "(the token, not shown)" if "auth-token" in line else (out.decode().strip().splitlines() or [""])[-1]
+            log.append(f"$ {line}\n{shown}")
             assert proc.returncode == 0, f"docs/cluster.md step 1 failed: {line}\n{out.decode()[-2000:]}"
         client_env = dict(env, **{k: v.replace("HEAD_IP", "127.0.0.1").replace("6379", str(port)) for k, v in env_vars.items()})
         _wait_for_cpus(f"127.0.0.1:{port}", client_env, 3)
-        yield f"127.0.0.1:{port}", client_env, groups[-1]
+        yield SimpleNamespace(address=f"127.0.0.1:{port}", env=client_env, home=home, head_group=groups["head"],
+                              worker_group=groups["worker"], log=log)
     finally:
-        for group in reversed(groups):
+        for group in reversed(list(groups.values())):
             for sig in (signal.SIGTERM, signal.SIGKILL):
                 try:
                     os.killpg(group, sig)
@@ -213,7 +233,14 @@ def two_nodes(tmp_path):
                     os.remove("/tmp/ray/ray_current_cluster")
         except OSError:
             pass
-        subprocess.run(["rm", "-rf", temp_dir])
+        subprocess.run(["rm", "-rf", temp_dir, home])
+
+
+@pytest.fixture
+def two_nodes():
+    """docs/cluster.md's two nodes (`_documented_nodes`). Yields (address, env, worker pgid)."""
+    with _documented_nodes() as nodes:
+        yield nodes.address, nodes.env, nodes.worker_group
 
 
 def _node_runs_a_trial(group: int) -> bool:
@@ -271,3 +298,81 @@ def test_a_collection_finishes_when_a_node_is_lost_following_the_readme_steps(tw
     else:
         assert after_kill < 5 + 30, err[-3000:]
     assert after_kill < 120  # bounded: the job never waits on a worker the cluster cannot place
+
+
+def _step_commands(number):
+    """The commands of step `number` of docs/cluster.md's "Scaling out" block (no exports, no comments)."""
+    text = _doc_block().split(f"# {number}.", 1)[1].split(f"# {number + 1}.", 1)[0]
+    return [c for c in _commands(text.splitlines()[1:]) if not c.startswith("export ")]
+
+
+def _run_on_both_nodes(command, nodes, timeout_s=400):
+    """Run `command` (bash) with step 2's environment; return (process, the nodes that ran a trial while it ran)."""
+    proc = subprocess.Popen(["bash", "-c", command], env=nodes.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen, deadline = set(), time.monotonic() + timeout_s
+    while proc.poll() is None and time.monotonic() < deadline:
+        seen |= {name for name, group in (("head", nodes.head_group), ("worker", nodes.worker_group))
+                 if name not in seen and _node_runs_a_trial(group)}
+        time.sleep(0.05)
+    out, err = proc.communicate(timeout=max(1.0, deadline - time.monotonic()))
+    return proc, out, err, seen
+
+
+@pytest.mark.postgres
+def test_the_cluster_steps_run_as_written_from_a_fresh_home(tmp_path, postgres_url, sweep_file):
+    """docs/cluster.md steps 1 to 3 as a new cluster user types them, on a HOME with no Ray token: the head
+    authenticates with the token step 1 made, a collection and an evaluation run trials on both nodes, and
+    two sweep processes share one PostgreSQL study. The paper's configs are swapped for small ones and the
+    pipeline line (hours of training) is left out; everything else is the doc's text."""
+    import yaml
+
+    from tests.tune.test_workers import assert_shared_study, load_trials
+
+    small_configs = {
+        "experiments/spillage.yaml": _collect_config(tmp_path, None, episodes=6),
+        "experiments/evaluate.yaml": tmp_path / "evaluate.yaml",
+    }
+    small_configs["experiments/evaluate.yaml"].write_text(yaml.safe_dump({
+        "run_id": "cluster", "output_dir": str(tmp_path / "evaluate"), "methods": ["rule_based"],
+        "foods": ["chocolate_balls"], "levels": ["low"], "trials": 6, "cloud": {"n_points": 64, "cad_surface_samples": 400},
+        "scoop": {"max_steps": 36, "min_steps": 12}, "transfer": {"pour_steps": 8, "settle_steps": 5},
+    }))
+    step2, step3 = _step_commands(2), _step_commands(3)
+    assert [c.split()[1] for c in step2] == ["collect", "evaluate", "pipeline"], step2
+    with _documented_nodes() as nodes:
+        assert os.path.getsize(os.path.join(nodes.home, ".ray", "auth_token")) > 0  # made by step 1, in the fresh HOME
+        unauthenticated = dict(nodes.env, RAY_AUTH_MODE="token", RAY_AUTH_TOKEN="0" * 32)
+        refused = subprocess.run(["ray", "status", f"--address={nodes.address}"], env=unauthenticated,
+                                 capture_output=True, text=True, timeout=120)
+        assert refused.returncode != 0, "the head started by step 1 accepts any token"
+        for command in step2[:2]:
+            config = command.split()[2]
+            proc, out, err, seen = _run_on_both_nodes(command.replace(config, str(small_configs[config])) + " --no-progress", nodes)
+            nodes.log.append(f"$ {command}  [{small_configs[config].name}]\nexit {proc.returncode}, trials ran on: {sorted(seen)}")
+            assert proc.returncode == 0, err[-3000:]
+            assert seen == {"head", "worker"}, f"{command}: trials ran only on {seen}\n{err[-2000:]}"
+        assert len(list((tmp_path / "spill" / "episodes").glob("*.npz"))) == 6
+        import pandas as pd
+
+        records = pd.read_parquet(tmp_path / "evaluate" / "episodes.parquet")
+        assert len(records) == 6 and (records["error"].fillna("") == "").all(), records["error"].tolist()
+
+    # step 3 against a throwaway PostgreSQL server; createdb reads the server from libpq's environment
+    url = postgres_url.rsplit("/", 1)[0]  # postgresql://postgres@127.0.0.1:PORT
+    host, port = url.split("@", 1)[1].split(":")
+    pg_env = dict(os.environ, PGHOST=host, PGPORT=port, PGUSER="postgres")
+    createdb, sweep = step3[0], step3[1]
+    assert createdb == "createdb grits" and sweep.startswith("grits-lab sweep sweeps/grits_paper.yaml --storage postgresql://")
+    done = subprocess.run(["bash", "-c", createdb], env=pg_env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    config = sweep_file("cluster_pg", n_trials=8, synthetic={"seconds_per_episode": 0.04})
+    storage = f"{url}/grits"
+    line = sweep.replace("sweeps/grits_paper.yaml", str(config)).replace("postgresql://USER:PASSWORD@DB_HOST/grits", storage)
+    procs = [subprocess.Popen(["bash", "-c", line], env=pg_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+             for _ in range(2)]
+    for proc in procs:
+        out, _ = proc.communicate(timeout=300)
+        assert proc.returncode == 0, out[-3000:]
+    assert_shared_study(load_trials(config, storage), 8)
+    nodes.log.append(f"$ {createdb}\n$ {sweep}  x2  [{config.name}]\n8 trials shared by 2 processes")
+    print("\n".join(nodes.log))

@@ -311,7 +311,9 @@ def test_a_chunk_label_run_keeps_the_resume_fingerprint_of_runs_made_before_the_
 
     cfg = _config(tmp_path, tiny_dataset)
     before = config_to_dict(cfg)
-    del before["train"]["epochs"], before["data"]["label"]
+    del before["train"]["epochs"], before["data"]["label"], before["train"]["tracking"]  # runs before both keys
+    assert _resume_fingerprint(cfg) == config_fingerprint(before)
+    cfg.train.tracking.experiment = "elsewhere"  # where the metrics are shown does not stop a resume
     assert _resume_fingerprint(cfg) == config_fingerprint(before)
     cfg.data.label = "horizon"
     assert _resume_fingerprint(cfg) != config_fingerprint(before)
