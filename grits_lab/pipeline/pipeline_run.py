@@ -106,11 +106,7 @@ def _run_stages(config: PipelineConfig, layout: Layout, stages: list[str], texts
             continue
         if previous.get("fingerprint") not in (None, fp):
             # the config changed: the stage's old outputs would be resumed under the wrong config
-            for path in layout.stage_outputs(stage):
-                if path.is_dir():
-                    shutil.rmtree(path)
-                elif path.exists():
-                    path.unlink()
+            remove_outputs(layout.stage_outputs(stage))
             print(f"[{index}/{len(stages)}] {stage}: config changed, previous outputs removed", file=sys.stderr)
         config_path = layout.configs / f"{stage}.yaml"
         write_text_atomic(config_path, text, mode=0o600 if holds_password(text) else None)
@@ -130,3 +126,19 @@ def _run_stages(config: PipelineConfig, layout: Layout, stages: list[str], texts
 
 def _jsonable(value: Any) -> Any:
     return json.loads(json.dumps(value, default=str))
+
+
+def remove_outputs(paths: list[Path]) -> None:
+    """Remove a stage's outputs (files and folders under the pipeline's directory) before it re-runs
+    under a changed config. A symbolic link is removed itself, never what it points at (a dataset
+    linked in from elsewhere is kept); StorageError naming the path when one cannot be removed."""
+    from grits_lab.errors import StorageError
+
+    for path in paths:
+        try:
+            if path.is_symlink() or path.is_file():
+                path.unlink()
+            elif path.is_dir():
+                shutil.rmtree(path)
+        except OSError as exc:
+            raise StorageError(f"cannot remove the earlier output {path}: {exc.strerror or exc}") from None

@@ -286,10 +286,11 @@ def comparison_markdown(table: pd.DataFrame) -> str:
         lines[-1] += (f" Scoop actions offset (`scoop_action_offset_m`): {named['before']} in {before}, "
                       f"{named['after']} in {after}: the changes are what that offset did.")
     if {"guidance_before", "guidance_after"} <= set(table.columns):
-        apart = table[table["guidance_before"].fillna("") != table["guidance_after"].fillna("")]
-        for _, row in apart.iterrows():  # paired by episode, not by setting: say so
-            lines[-1] += (f" {method_display(row['method'])} ran at {row['guidance_before'] or 'no guidance'} in {before} and at "
-                          f"{row['guidance_after'] or 'no guidance'} in {after}: the changes include what that setting did.")
+        setting = {side: table[f"guidance_{side}"].astype(object).fillna("") for side in ("before", "after")}  # empty reads back as NaN
+        apart = table[setting["before"] != setting["after"]]
+        for i, row in apart.iterrows():  # paired by episode, not by setting: say so
+            lines[-1] += (f" {method_display(row['method'])} ran at {setting['before'][i] or 'no guidance'} in {before} and at "
+                          f"{setting['after'][i] or 'no guidance'} in {after}: the changes include what that setting did.")
     differ = int(table["kernels_differ"].sum()) if "kernels_differ" in table.columns else 0
     if differ:
         first = table[table["kernels_differ"] > 0].iloc[0]

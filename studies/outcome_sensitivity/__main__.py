@@ -116,9 +116,10 @@ def _branches(args: argparse.Namespace) -> int:
     runs = branch_runs(args.runs, args.method)  # before any model runs
     check_model_names(list(checkpoints))
     predictions = branch_predictions(checkpoints, args.runs, args.method, label)
-    import yaml
+    from grits_lab.config import parse_yaml
 
-    name = (yaml.safe_load((runs[0].path / "config.yaml").read_text()) or {}).get("run_id", runs[0].path.name)
+    config_file = runs[0].path / "config.yaml"
+    name = (parse_yaml(config_file.read_text(), config_file) or {}).get("run_id", runs[0].path.name)
     root = Path(args.output_dir or (configs[0].output_dir if configs else runs[0].path.parent))
     given = "+".join(r.path.name for r in runs)  # as --held-out names its sets: another set of runs, another folder
     out = root / f"comparison_branches_{name}_plan{runs[0].plan}_{given}_{args.method}_{label}"

@@ -237,3 +237,20 @@ def test_a_carry_stage_given_the_wrong_kind_of_config_fails_before_anything_runs
     err = [line for line in capsys.readouterr().err.strip().splitlines() if "error" in line]
     assert len(err) == 1 and fragment in err[0] and f"stage `{stage}`" in err[0]
     assert not (tmp_path / "run").exists()
+
+
+def test_a_changed_stage_removes_its_own_outputs_but_never_what_a_link_points_at(tmp_path):
+    from grits_lab.pipeline.pipeline_run import remove_outputs
+
+    kept = tmp_path / "elsewhere" / "demos"
+    kept.mkdir(parents=True)
+    (kept / "episode.npz").write_bytes(b"data")
+    stage = tmp_path / "pipeline" / "datasets"
+    stage.mkdir(parents=True)
+    (stage / "demos").symlink_to(kept, target_is_directory=True)
+    (stage / "spillage").mkdir()
+    (stage / "spillage" / "episode.npz").write_bytes(b"data")
+    (stage / "episodes.parquet").write_bytes(b"data")
+    remove_outputs([stage / "demos", stage / "spillage", stage / "episodes.parquet", stage / "absent"])
+    assert not any(stage.iterdir())
+    assert (kept / "episode.npz").read_bytes() == b"data"
