@@ -95,8 +95,43 @@ def test_the_sweep_stage_keeps_the_sweep_files_evaluation_overrides(tmp_path):
     wired = yaml.safe_load(stage_config_text("sweep", config, layout))
     evaluation = wired["evaluation"]
     assert evaluation["overrides"] == {"guidance": {"step": "normalized"}}  # rho is tuned on the step the file names
-    assert evaluation["config"] == str(layout.configs / "evaluate.yaml")  # the pipeline's own links win
+    assert evaluation["config"] == str(layout.sweep_evaluation_config)  # the pipeline's own links win
     assert all(str(tmp_path) in path for path in evaluation["checkpoints"])
+
+
+def test_the_quickstarts_evaluation_runs_with_its_sweeps_best_point(tmp_path):
+    from grits_lab.config import load_yaml
+    from grits_lab.pipeline.pipeline_run import stage_config_text
+    from grits_lab.pipeline.stages import Layout
+
+    data = load_yaml("experiments/quickstart.yaml")
+    data["output_dir"] = str(tmp_path / "quick")
+    config = load_pipeline_config(_write(tmp_path / "p.yaml", data))
+    stages = config.ordered_stages()
+    assert "sweep" in stages and stages.index("sweep") < stages.index("evaluate")
+    layout = Layout(tmp_path / "quick")
+    sweep = yaml.safe_load(stage_config_text("sweep", config, layout))
+    assert sweep["evaluation"]["config"] == str(layout.sweep_evaluation_config)
+    assert sweep["objective"]["mode"] == "multi" and sweep["reference"] == ["dp"]
+    assert sweep["enqueue"][0] == {"rho": 2.5, "s": 30}  # the paper's defaults run first
+    untuned = yaml.safe_load(stage_config_text("evaluate", config, layout))
+    episodes = {(e.food, e.level, e.seed) for e in load_study_config_from(sweep, tmp_path)}
+    assert untuned["seed"] != sweep["validation"]["seed"] and episodes  # the sweep tunes on its own seeds
+    layout.sweep_dir.mkdir(parents=True)
+    (layout.sweep_dir / "best.yaml").write_text("# trial 3\nguidance: {rho: 0.7, s: 18}\n")
+    tuned = yaml.safe_load(stage_config_text("evaluate", config, layout))
+    assert (tuned["guidance"]["rho"], tuned["guidance"]["s"]) == (0.7, 18)
+    assert {k: v for k, v in tuned["guidance"].items() if k not in ("rho", "s")} == \
+        {k: v for k, v in untuned["guidance"].items() if k not in ("rho", "s")}
+    assert yaml.safe_load(stage_config_text("evaluate", config, layout, tuned=False))["guidance"] == untuned["guidance"]
+
+
+def load_study_config_from(sweep: dict, tmp_path):
+    """The validation episodes of a wired sweep mapping, read against the quickstart's evaluation config."""
+    from grits_lab.tune.study_config import load_study_config
+
+    data = {**sweep, "evaluation": {**sweep["evaluation"], "config": "experiments/evaluate_quick.yaml"}}
+    return load_study_config(_write(tmp_path / "sweep.yaml", data)).episodes()
 
 
 @pytest.mark.parametrize("stage, overrides, fragment", [
