@@ -15,7 +15,7 @@ import yaml
 
 from grits_lab.cli import main
 from grits_lab.config import config_from_dict, config_to_dict
-from grits_lab.data.format import load_index, read_episode
+from grits_lab.data.format import list_episode_files, load_index, read_episode
 from grits_lab.errors import ConfigError, InputError
 from grits_lab.spillage.predictor_checkpoint import load_predictor
 from grits_lab.spillage.predictor_config import PredictorConfig
@@ -311,7 +311,7 @@ def test_a_chunk_label_run_keeps_the_resume_fingerprint_of_runs_made_before_the_
 
     cfg = _config(tmp_path, tiny_dataset)
     before = config_to_dict(cfg)
-    del before["train"]["epochs"], before["data"]["label"]
+    del before["train"]["epochs"], before["data"]["label"], before["train"]["class_weight"]  # neither key existed then
     assert _resume_fingerprint(cfg) == config_fingerprint(before)
     cfg.data.label = "horizon"
     assert _resume_fingerprint(cfg) != config_fingerprint(before)
@@ -396,3 +396,46 @@ def test_cli_refuses_unusable_dataset_paths_in_one_line_before_any_epoch(tmp_pat
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and expected in err[0], (second[:20], err)
     assert not (tmp_path / "runs").exists()
+
+
+def test_balanced_class_weights_give_each_class_half_the_loss_and_need_both_classes():
+    import torch
+
+    from grits_lab.spillage.predictor_training import class_weights
+
+    labels = np.array([0] * 9 + [1])
+    weight = class_weights(labels, "balanced")
+    assert torch.allclose(weight, torch.tensor([10 / 18, 10 / 2]))
+    assert float(weight[0] * 9) == pytest.approx(float(weight[1] * 1))  # each class carries half
+    assert class_weights(labels, "none") is None
+    with pytest.raises(InputError, match="train.class_weight: balanced needs both classes"):
+        class_weights(np.zeros(5), "balanced")
+
+
+def test_a_balanced_predictor_ranks_spilling_chunks_of_a_set_where_few_spill(tmp_path):
+    """Few spilling chunks: balanced class weights train a predictor whose P(spill) varies across chunks
+    and ranks the spilling ones higher on the training set, and a run without weights keeps its fingerprint."""
+    from tests.spillage.conftest import write_tiny_spillage_dataset
+
+    dataset = write_tiny_spillage_dataset(tmp_path / "rare", n_episodes=16, n_chunks=4, seed=3, spill_below=0.04)
+    labels = np.concatenate([read_episode(p)[0]["chunk_spilled"] for p in list_episode_files(dataset)])
+    assert 0 < labels.mean() < 0.25
+    cfg = _config(tmp_path, dataset, epochs=25)
+    cfg.train.class_weight = "balanced"
+    cfg.model.dropout = 0.0
+    train_predictor(cfg, progress=False)
+    last = json.loads((tmp_path / "runs" / "tiny" / "history.json").read_text())[-1]
+    assert last["train_auroc"] > 0.8 and last["train_p_spill_std"] > 0.05
+    assert last["train_positives"] == int(round(last["train_n"] * last["train_spill_rate"]))
+
+
+def test_runs_without_class_weights_keep_their_resume_fingerprint(tmp_path, tiny_dataset):
+    from grits_lab.config import config_fingerprint
+    from grits_lab.spillage.predictor_training import _resume_fingerprint
+
+    cfg = _config(tmp_path, tiny_dataset)
+    before = config_to_dict(cfg)
+    del before["train"]["epochs"], before["data"]["label"], before["train"]["class_weight"]
+    assert _resume_fingerprint(cfg) == config_fingerprint(before)
+    cfg.train.class_weight = "balanced"
+    assert _resume_fingerprint(cfg) != config_fingerprint(before)
