@@ -272,3 +272,20 @@ def test_a_carry_stage_given_the_wrong_kind_of_config_fails_before_anything_runs
     err = [line for line in capsys.readouterr().err.strip().splitlines() if "error" in line]
     assert len(err) == 1 and fragment in err[0] and f"stage `{stage}`" in err[0]
     assert not (tmp_path / "run").exists()
+
+
+def test_the_closing_summary_names_the_sweeps_best_point_its_front_and_the_reference(tmp_path):
+    from grits_lab.pipeline.closing import closing_lines
+    from grits_lab.pipeline.stages import Layout
+
+    layout = Layout(tmp_path / "quick")
+    layout.sweep_dir.mkdir(parents=True)
+    point = {"trial": 1, "rho": 0.8, "s": 24, "success_rate": 0.75, "spillage_rate": 0.0}
+    summary = {"best": point, "episodes_per_trial": 4, "pareto_front": [point],
+               "reference": {"dp": {"success_rate": 0.5, "spillage_rate": 0.25}}, "dashboard": "optuna-dashboard J"}
+    (layout.sweep_dir / "summary.json").write_text(json.dumps(summary))
+    lines = closing_lines(layout, ["sweep"])
+    assert lines == ["sweep: best rho 0.8, s 24 (trial 1: success 0.75, spillage 0.00 over 4 validation episodes; dp on the "
+                     "same episodes: success 0.50, spillage 0.25); Pareto front: rho 0.8 s 24 (success 0.75, spillage 0.00); "
+                     "optuna-dashboard J"]
+    assert closing_lines(layout, ["demos"]) == []  # nothing for stages this pipeline lacks
