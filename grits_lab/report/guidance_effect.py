@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from grits_lab.records import plan_guidance_effect
 from grits_lab.report.tables import ReportTable
 from grits_lab.report.vocabulary import MAIN_METHODS, ordered
 
@@ -61,29 +62,14 @@ def plans_lowered(part: pd.DataFrame) -> tuple[int, int]:
 
 def plan_effect(rows: pd.DataFrame) -> dict[str, dict]:
     """Per method variant, what guidance did over all its compared plans (`guidance.compare_unguided`):
-    {variant: {method_name, plans, p_spill_unguided (median), p_spill_guided (median),
-    relative_change ((guided - unguided) / unguided of the medians; negative: lowered),
-    displacement_mm (median, mm per waypoint of the executed chunk)}}. Variants without per-plan
-    lists are left out."""
-    columns = ("plan_p_spill_unguided", "plan_p_spill_guided", "plan_displacement_mm")
+    {variant: {method_name, **records.plan_guidance_effect}}. Variants without per-plan lists are left out."""
     out: dict[str, dict] = {}
-    if rows.empty or not set(columns) <= set(rows.columns):
+    if rows.empty:
         return out
     for variant in ordered(rows["variant"].unique(), MAIN_METHODS):
         part = rows[rows["variant"] == variant]
-        flat: list[np.ndarray] = [np.zeros(0)] * 3
-        for values in zip(*(part[c] for c in columns)):
-            if any(v is None or (isinstance(v, float) and np.isnan(v)) for v in values):
-                continue
-            flat = [np.concatenate([f, np.asarray(v, dtype=float)]) for f, v in zip(flat, values)]
-        if not len(flat[0]):
-            continue
-        before, after = float(np.median(flat[0])), float(np.median(flat[1]))
-        out[str(variant)] = {"method_name": str(part["variant_name"].iloc[0]), "plans": int(len(flat[0])),
-                             "p_spill_unguided": before, "p_spill_guided": after,
-                             "relative_change": (after - before) / before if before > 0 else float("nan"),
-                             "p_spill_spread": float(np.std(flat[0])),
-                             "displacement_mm": float(np.median(flat[2]))}
+        if (effect := plan_guidance_effect(part)) is not None:
+            out[str(variant)] = {"method_name": str(part["variant_name"].iloc[0]), **effect}
     return out
 
 
