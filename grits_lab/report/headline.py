@@ -88,7 +88,9 @@ def episodes_sentence(episodes: pd.DataFrame | None) -> str:
     trials = sorted(pd.to_numeric(episodes["trial"], errors="coerce").dropna().astype(int).unique()) if "trial" in episodes.columns else []
     per_method = episodes.groupby("variant").size()
     counts = per_method.iloc[0] if per_method.nunique() == 1 else ", ".join(f"{v}: {n}" for v, n in per_method.items())
+    errors = int(episodes["is_error"].sum()) if "is_error" in episodes.columns else 0
     return (f"Ran: foods {', '.join(foods)}; levels {levels}; trial{'s' if len(trials) != 1 else ''} "
             f"{', '.join(map(str, trials)) or MISSING}; {seeds.nunique()} episode seeds"
             + (f" ({', '.join(map(str, sorted(seeds.unique())))})" if 0 < seeds.nunique() <= 8 else "")
-            + f"; {counts} episodes per method.")
+            + f"; {counts} episodes per method"
+            + (f"; {errors} ended in an error, counted as a failed task (Errors, below)" if errors else "") + ".")

@@ -37,7 +37,9 @@ def test_the_first_screen_says_which_foods_levels_and_seeds_ran():
     text = episodes_sentence(records)
     seeds = sorted(records["seed"].unique())
     assert "foods penne (unseen)" in text and "levels high" in text and "trials 0, 1" in text
-    assert f"2 episode seeds ({seeds[0]}, {seeds[1]})" in text and "2 episodes per method" in text
+    assert f"2 episode seeds ({seeds[0]}, {seeds[1]})" in text and "2 episodes per method." in text
+    crashed = normalize_records(pd.DataFrame([episode("dp", "penne", "high", 0, "success", error="OutOfMemoryError")]))
+    assert "1 ended in an error, counted as a failed task" in episodes_sentence(crashed)
 
 
 def test_the_title_names_the_experiment_and_protocol_not_the_folder(tmp_path):
