@@ -412,21 +412,48 @@ def test_balanced_class_weights_give_each_class_half_the_loss_and_need_both_clas
         class_weights(np.zeros(5), "balanced")
 
 
-def test_a_balanced_predictor_ranks_spilling_chunks_of_a_set_where_few_spill(tmp_path):
-    """Few spilling chunks: balanced class weights train a predictor whose P(spill) varies across chunks
-    and ranks the spilling ones higher on the training set, and a run without weights keeps its fingerprint."""
+def test_balanced_class_weights_lift_p_spill_towards_an_even_prior_on_a_set_where_few_spill(tmp_path):
+    """Few spilling chunks: with balanced weights each class carries half the loss, so the trained
+    P(spill) sits nearer a 50 % prior than the unweighted run's, which follows the set's share of
+    spills; both rank the spilling chunks first, and the history logs the positives and the spread."""
     from tests.spillage.conftest import write_tiny_spillage_dataset
 
     dataset = write_tiny_spillage_dataset(tmp_path / "rare", n_episodes=16, n_chunks=4, seed=3, spill_below=0.04)
     labels = np.concatenate([read_episode(p)[0]["chunk_spilled"] for p in list_episode_files(dataset)])
     assert 0 < labels.mean() < 0.25
-    cfg = _config(tmp_path, dataset, epochs=25)
-    cfg.train.class_weight = "balanced"
-    cfg.model.dropout = 0.0
-    train_predictor(cfg, progress=False)
-    last = json.loads((tmp_path / "runs" / "tiny" / "history.json").read_text())[-1]
-    assert last["train_auroc"] > 0.8 and last["train_p_spill_std"] > 0.05
-    assert last["train_positives"] == int(round(last["train_n"] * last["train_spill_rate"]))
+    scores = {}
+    for mode in ("none", "balanced"):
+        cfg = _config(tmp_path / mode, dataset, epochs=25)
+        cfg.train.class_weight = mode
+        cfg.model.dropout = 0.0
+        result = train_predictor(cfg, progress=False)
+        scores[mode] = evaluate_predictor(load_predictor(result["best_checkpoint"]), dataset)
+        last = json.loads((tmp_path / mode / "runs" / "tiny" / "history.json").read_text())[-1]
+        assert last["train_positives"] == int(round(last["train_n"] * last["train_spill_rate"])) and last["train_p_spill_std"] > 0
+    assert scores["balanced"]["mean_p_spill"] > scores["none"]["mean_p_spill"] + 0.05
+    assert scores["balanced"]["auroc"] > 0.8 and scores["balanced"]["positives"] == int(labels.sum())
+
+
+def test_the_weighted_loss_is_the_weighted_mean_cross_entropy(tiny_dataset):
+    import torch
+
+    from grits_lab.spillage.chunk_dataset import CLOUD_KEYS, SpillageChunkDataset, fit_normalizers
+    from grits_lab.spillage.model import SpillagePredictor
+    from grits_lab.spillage.predictor_training import predict
+
+    cfg = config_from_dict(PredictorConfig, {"model": {"dp3": {"hidden_dims": [16], "out_dim": 8}}})
+    files = sorted(load_index(tiny_dataset)["file"])
+    action_norm, cloud_norm = fit_normalizers(tiny_dataset, files, CLOUD_KEYS["composite"], 0.1)
+    data = SpillageChunkDataset(tiny_dataset, files, cloud_key=CLOUD_KEYS["composite"], n_action_steps=12, action_normalizer=action_norm,
+                                cloud_normalizer=cloud_norm, points_per_object=32, shuffle=False, seed=0, cache=False)
+    torch.manual_seed(0)
+    model = SpillagePredictor(cfg.model)
+    weight = torch.tensor([0.25, 3.0])
+    p, y, plain = predict(model, data)
+    _, _, weighted = predict(model, data, weight=weight)
+    ce = -np.log(np.where(y == 1, p, 1 - p))
+    w = np.where(y == 1, 3.0, 0.25)
+    assert plain == pytest.approx(ce.mean(), rel=1e-4) and weighted == pytest.approx((w * ce).sum() / w.sum(), rel=1e-4)
 
 
 def test_runs_without_class_weights_keep_their_resume_fingerprint(tmp_path, tiny_dataset):
