@@ -20,7 +20,6 @@ import json
 import os
 import platform
 import resource
-import shutil
 import subprocess
 import sys
 import time
@@ -70,23 +69,9 @@ def run_one(name: str, command: list[str], timeout: float) -> dict:
 
 
 def time_pipeline(timeout: float) -> dict:
-    out = ROOT / "results" / "benchmarks" / "pipeline_run"
-    if out.exists():
-        shutil.rmtree(out)
-    config = out.parent / "pipeline_quickstart.yaml"
-    text = (ROOT / "experiments" / "quickstart.yaml").read_text()
-    config.write_text(text.replace("output_dir: results/quickstart", f"output_dir: {out}"))
-    start = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "grits_lab.cli", "pipeline", str(config), "--no-progress"],
-                          cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False)
-    seconds = round(time.perf_counter() - start, 1)
-    state_path = out / "pipeline_state.json"
-    stages = json.loads(state_path.read_text()) if state_path.exists() else {}
-    result = {"status": "ok" if proc.returncode == 0 else "failed", "seconds": seconds,
-              "stage_seconds": {k: v.get("seconds") for k, v in stages.items()}}
-    if proc.returncode != 0:
-        result["error"] = "\n".join((proc.stderr or proc.stdout).strip().splitlines()[-5:])
-    return result
+    from bench_quickstart import time_pipeline as run  # this script's folder is on sys.path when run as a script
+
+    return run(ROOT / "experiments" / "quickstart.yaml", ROOT / "results" / "benchmarks" / "pipeline_run", timeout)
 
 
 def _median(values: list) -> float | None:

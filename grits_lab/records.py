@@ -87,3 +87,32 @@ def has_error(errors):
     Series). The one rule for what counts as a failed episode: evaluate's summary, the sweep
     objective and the report all ask it."""
     return error_text(errors).str.strip().str.len() > 0
+
+
+# Per-plan guidance columns (`guidance.compare_unguided`): one list per episode, one entry per plan.
+PLAN_COLUMNS = ("plan_p_spill_unguided", "plan_p_spill_guided", "plan_displacement_mm")
+
+
+def plan_guidance_effect(frame) -> dict | None:
+    """What guidance did over every compared plan of the records in `frame` (a pandas frame with
+    PLAN_COLUMNS): {plans, p_spill_unguided, p_spill_guided (medians of the predictor's P(spill) of
+    the unguided sample from the same noise and of the executed one), relative_change ((guided -
+    unguided) / unguided of the medians; negative: lowered), p_spill_spread (standard deviation of
+    the unguided P(spill)), displacement_mm (median distance between their executed spoon positions,
+    mm per waypoint)}; None when the records hold no compared plan."""
+    import numpy as np
+
+    if frame is None or len(frame) == 0 or not set(PLAN_COLUMNS) <= set(frame.columns):
+        return None
+    flat: list[list] = [[], [], []]
+    for values in zip(*(frame[c] for c in PLAN_COLUMNS)):
+        if any(v is None or (isinstance(v, float) and np.isnan(v)) for v in values):
+            continue
+        for store, value in zip(flat, values):
+            store.extend(np.asarray(value, dtype=float).reshape(-1).tolist())
+    if not flat[0]:
+        return None
+    before, after = float(np.median(flat[0])), float(np.median(flat[1]))
+    return {"plans": len(flat[0]), "p_spill_unguided": before, "p_spill_guided": after,
+            "relative_change": (after - before) / before if before > 0 else float("nan"),
+            "p_spill_spread": float(np.std(flat[0])), "displacement_mm": float(np.median(flat[2]))}

@@ -1,6 +1,6 @@
 """The documentation's shape: a reference page says how a thing works and holds no measurement (a
 measured number is rendered from a committed summary, between `<!-- generated: ... -->` markers, or
-lives in docs/benchmarks.md under the script that measures it); the user guide stays short; the
+lives in benchmarks/README.md under the script that measures it); the user guide stays short; the
 README keeps its limits; every relative link in the docs reaches an existing file and heading."""
 
 from __future__ import annotations
@@ -12,12 +12,11 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
-# The one page of measured figures: each under the benchmark script that makes it. Generated results
+# Measured figures live beside the scripts that make them (benchmarks/README.md). Generated results
 # (docs/results.md's blocks, the studies' summaries) are rendered, and the lab notebook of earlier
 # protocols lives in docs/archive/, outside docs/*.md.
-MEASURED_PAGES = {"benchmarks.md"}
-REFERENCE_PAGES = sorted([ROOT / "README.md", *(p for p in DOCS.glob("*.md") if p.name not in MEASURED_PAGES)])
-LINKED_PAGES = sorted([ROOT / "README.md", *DOCS.rglob("*.md"), *(ROOT / "studies").rglob("*.md")])
+REFERENCE_PAGES = sorted([ROOT / "README.md", *DOCS.glob("*.md")])
+LINKED_PAGES = sorted([ROOT / "README.md", *DOCS.rglob("*.md"), *(ROOT / "studies").rglob("*.md"), ROOT / "benchmarks" / "README.md"])
 # The user guide, docs/*.md, is read in one sitting: about 20,000 words at most.
 GUIDE_WORDS = 20_000
 README_LINES, README_PARAGRAPH_WORDS, RESULTS_LINES = 130, 90, 150
@@ -129,7 +128,7 @@ def test_a_reference_page_holds_no_measurements(page):
     found = hand_written_measurements(page.read_text())
     assert not found, (f"{page.relative_to(ROOT)} holds hand-typed measurements ({'; '.join(found)}): render the "
                        "number from a committed summary (a `<!-- generated: ... -->` block), put a performance "
-                       "figure in docs/benchmarks.md under the script that makes it, or move a study's finding "
+                       "figure in benchmarks/README.md under the script that makes it, or move a study's finding "
                        "to its studies/<name>/README.md, and link there")
 
 

@@ -42,6 +42,13 @@ def _run(args: argparse.Namespace) -> int:
         seconds = result.get("seconds")
         timing = f"{seconds:>7.0f} s" if isinstance(seconds, (int, float)) else " " * 9
         print(f"  {stage:<20} {result['status']:<13} {timing}")
+    from pathlib import Path
+
+    from grits_lab.pipeline.closing import closing_lines
+    from grits_lab.pipeline.stages import Layout
+
+    for line in closing_lines(Layout(Path(config.output_dir)), config.ordered_stages()):
+        print(line)
     if "report" in results:
         print(f"report: {config.output_dir}/report/report.html")
     return 0

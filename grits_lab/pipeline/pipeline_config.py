@@ -27,8 +27,8 @@ STAGE_ORDER = (
     "predictor_raw",
     "predictor_pointnet2",
     "predictor_horizon",
+    "sweep",  # before the evaluation: its best (rho, s) is the evaluation's guidance
     "evaluate",
-    "sweep",
     "report",
 )
 
@@ -43,8 +43,8 @@ UPSTREAM = {
     "predictor_raw": ("spillage", "spillage_heldout"),
     "predictor_pointnet2": ("spillage", "spillage_heldout"),
     "predictor_horizon": ("spillage_carry",),
-    "evaluate": ("demos", "policy", "bc", "predictor", "predictor_raw", "predictor_pointnet2", "predictor_horizon"),
-    "sweep": ("evaluate",),
+    "sweep": ("demos", "policy", "predictor"),
+    "evaluate": ("demos", "policy", "bc", "predictor", "predictor_raw", "predictor_pointnet2", "predictor_horizon", "sweep"),
     "report": ("evaluate", "sweep"),
 }
 

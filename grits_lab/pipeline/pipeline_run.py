@@ -29,13 +29,16 @@ STATE_FILE = "pipeline_state.json"
 RAY_STAGES = ("demos", "spillage", "evaluate", "sweep")  # the stages that run episodes on Ray
 
 
-def stage_config_text(stage: str, config: PipelineConfig, layout: Layout) -> str:
-    """The YAML a stage runs with: its file, the user's overrides, then the pipeline's links."""
+def stage_config_text(stage: str, config: PipelineConfig, layout: Layout, tuned: bool = True) -> str:
+    """The YAML a stage runs with: its file, the user's overrides, then the pipeline's links (for the
+    evaluate stage after a sweep, the sweep's best guidance unless `tuned` is False: stages.wire)."""
     spec = config.stages[stage]
     data = load_yaml(spec.config) if spec.config else {}
     data = merge_mappings(data, spec.overrides)
-    data = wire(stage, data, layout, set(config.stages), config.workers, config.address)
+    data = wire(stage, data, layout, set(config.stages), config.workers, config.address, tuned=tuned)
     header = f"# {stage} stage of pipeline `{config.name}`, generated from {spec.config or 'defaults'}\n"
+    if tuned and stage == "evaluate" and "sweep" in config.stages and (layout.sweep_dir / "best.yaml").is_file():
+        header += f"# guidance: the sweep stage's best point ({layout.sweep_dir / 'best.yaml'})\n"
     return header + yaml.safe_dump(data, sort_keys=False)
 
 
@@ -73,7 +76,7 @@ def run_pipeline(config: PipelineConfig, only: list[str] | None = None, force: l
     """
     layout = Layout(Path(config.output_dir))
     stages = config.ordered_stages()
-    texts = {stage: stage_config_text(stage, config, layout) for stage in stages}
+    texts = {stage: stage_config_text(stage, config, layout, tuned=False) for stage in stages}
     for stage in stages:  # a typo in the last stage's overrides fails now, not after the stages before it
         if not only or stage in only:
             check(stage, texts, config.stages[stage].config)
@@ -92,8 +95,11 @@ def _run_stages(config: PipelineConfig, layout: Layout, stages: list[str], texts
     fingerprints: dict[str, str] = {}
     results: dict[str, Any] = {}
     for index, stage in enumerate(stages, start=1):
-        text = texts[stage]
+        # the evaluate stage's text is taken now: a sweep stage before it has just written its best point
+        text = stage_config_text(stage, config, layout) if stage == "evaluate" else texts[stage]
         upstream = [fingerprints[s] for s in UPSTREAM.get(stage, ()) if s in fingerprints]
+        if stage == "sweep" and "evaluate" in texts:  # its trials run the evaluate stage's config
+            upstream.append(fingerprint(texts["evaluate"], []))
         fp = fingerprint(text, upstream)
         fingerprints[stage] = fp
         previous = state.get(stage, {})
@@ -110,6 +116,8 @@ def _run_stages(config: PipelineConfig, layout: Layout, stages: list[str], texts
             print(f"[{index}/{len(stages)}] {stage}: config changed, previous outputs removed", file=sys.stderr)
         config_path = layout.configs / f"{stage}.yaml"
         write_text_atomic(config_path, text, mode=0o600 if holds_password(text) else None)
+        if stage == "sweep" and "evaluate" in texts:
+            write_text_atomic(layout.sweep_evaluation_config, texts["evaluate"])
         print(f"[{index}/{len(stages)}] {stage}: running ({config_path})", file=sys.stderr)
         state[stage] = {"status": "running", "fingerprint": fp}
         write_json_atomic(layout.root / STATE_FILE, state)

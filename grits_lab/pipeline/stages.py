@@ -9,6 +9,7 @@ would get from `grits-lab collect/train/evaluate/sweep/report` with that file.
 
 from __future__ import annotations
 
+import sys
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -58,6 +59,16 @@ class Layout:
     def report_dir(self) -> Path:
         return self.root / "report"
 
+    @property
+    def sweep_dir(self) -> Path:
+        """The sweep stage's study folder: journal.log (its Optuna storage), trials, best.yaml, records."""
+        return self.evaluate_dir / "sweep"
+
+    @property
+    def sweep_evaluation_config(self) -> Path:
+        """The evaluation config the sweep's trials start from: the evaluate stage's, before the sweep's best (rho, s)."""
+        return self.configs / "sweep_evaluation.yaml"
+
     def stage_outputs(self, stage: str) -> list[Path]:
         """What a stage owns: removed before the stage re-runs under a changed config."""
         return {
@@ -72,7 +83,7 @@ class Layout:
             "predictor_pointnet2": [self.predictor_dir("predictor_pointnet2")],
             "predictor_horizon": [self.predictor_dir("predictor_horizon")],
             "evaluate": [self.evaluate_dir / "episodes.parquet", self.evaluate_dir / "records"],
-            "sweep": [self.evaluate_dir / "sweep"],
+            "sweep": [self.sweep_dir],
             "report": [self.report_dir],
         }[stage]
 
@@ -114,9 +125,21 @@ def _writing_to(data: dict[str, Any], path: Path) -> dict[str, Any]:
     return {**data, "output_dir": str(path)}
 
 
+def sweep_best(layout: Layout) -> dict[str, Any] | None:
+    """The sweep stage's best point as an evaluation override (`guidance: {rho, s}` and the sweep's
+    `evaluation.overrides`: grits_lab/tune/outputs.py), or None before the sweep has chosen one."""
+    from grits_lab.config import load_yaml
+
+    path = layout.sweep_dir / "best.yaml"
+    return load_yaml(path) if path.is_file() else None
+
+
 def wire(stage: str, data: dict[str, Any], layout: Layout, present: set[str],
-         workers: int | None, address: str | None) -> dict[str, Any]:
-    """The stage's config mapping with the pipeline's links set. `present`: configured stages."""
+         workers: int | None, address: str | None, tuned: bool = True) -> dict[str, Any]:
+    """The stage's config mapping with the pipeline's links set. `present`: configured stages.
+
+    With a sweep stage configured, the evaluate stage's guidance is the sweep's best point once the
+    sweep has written it (`tuned`; with `tuned=False` the evaluation config the sweep starts from)."""
     if stage in COLLECT_STAGES:
         data = _writing_to(data, layout.dataset(stage))
         if stage != "demos" and "demos" in present:
@@ -139,12 +162,17 @@ def wire(stage: str, data: dict[str, Any], layout: Layout, present: set[str],
         for name in PREDICTOR_STAGES:
             checkpoints[name] = str(predictor_checkpoint(layout, name)) if name in present else None
         data = merge_mappings(data, {"checkpoints": checkpoints})
+        if tuned and "sweep" in present and (best := sweep_best(layout)) is not None:
+            data = merge_mappings(data, best)  # as `grits-lab evaluate --override best.yaml`
         data = _writing_to(data, layout.evaluate_dir)
         return _executor(data, workers, address)
     if stage == "sweep":
+        own = dict(data.get("evaluation", {}))  # the sweep file's own keys (its `overrides`) stay, but the links are the pipeline's:
+        if "checkpoints" in (own.get("overrides") or {}):  # the evaluation config it starts from holds this pipeline's checkpoints
+            own["overrides"] = {k: v for k, v in own["overrides"].items() if k != "checkpoints"}
         evaluation = {
-            **data.get("evaluation", {}),  # the sweep file's own keys (its `overrides`) stay
-            "config": str(layout.configs / "evaluate.yaml"),
+            **own,
+            "config": str(layout.sweep_evaluation_config),
             "checkpoints": [str(policy_checkpoint(layout)), str(predictor_checkpoint(layout, "predictor"))],
             "method": "grits",
         }
@@ -279,6 +307,8 @@ def _run_bc(stage: str, config: Any, layout: Layout, progress: bool) -> dict[str
 
 
 def _run_predictor(stage: str, config: Any, layout: Layout, progress: bool) -> dict[str, Any]:
+    from grits_lab.io import write_json_atomic
+    from grits_lab.report.predictor_quality import HELDOUT_FILE
     from grits_lab.spillage.predictor_checkpoint import load_predictor
     from grits_lab.spillage.predictor_training import evaluate_predictor, train_predictor
 
@@ -287,6 +317,10 @@ def _run_predictor(stage: str, config: Any, layout: Layout, progress: bool) -> d
     if predictor_dataset(stage) == "spillage" and ((heldout / "index.parquet").exists() or (heldout / "episodes").is_dir()):
         predictor = load_predictor(predictor_checkpoint(layout, stage))
         summary = {**summary, "heldout": evaluate_predictor(predictor, heldout)}
+        write_json_atomic(layout.predictor_dir(stage) / HELDOUT_FILE, summary["heldout"])  # the report's calibration line
+    if summary.get("degenerate"):
+        print(f"warning: predictor `{stage}` is degenerate: {summary['degenerate']}; guidance has nothing to act on",
+              file=sys.stderr, flush=True)
     return summary
 
 

@@ -26,8 +26,17 @@ from grits_lab.report.run_records import RunData, load_run
 from grits_lab.report.provenance import episode_counts, error_messages, protocol_summary, report_provenance
 from grits_lab.report.real_robot import real_robot_table
 from grits_lab.report.run_compare import paired_methods_table, paired_section_title
-from grits_lab.report.guidance_effect import guidance_by_plan_table, guidance_figure, guidance_table, guided_episodes
-from grits_lab.report.headline import headline_sentence, headline_table
+from grits_lab.report.guidance_effect import (
+    guidance_by_plan_table,
+    guidance_figure,
+    guidance_table,
+    guided_episodes,
+    plan_effect,
+    plan_effect_line,
+)
+from grits_lab.report.headline import NOTHING_TO_ACT_ON, decision_sentence, episodes_sentence, headline_sentence, headline_table
+from grits_lab.report.predictor_quality import PredictorQuality, find_predictors
+from grits_lab.spillage.classifier_metrics import DEGENERATE_SPREAD
 from grits_lab.report.render import (
     Collapsed,
     Preformatted,
@@ -95,7 +104,11 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also
     real_table = real_robot_table(run.episodes, real) if real else None  # a bad file fails before anything is written
     ensure_writable_dir(out)
     result = ReportResult(out)
-    sections = _results_sections(run, out, result) + _training_sections(training, out, result) + [_provenance_section(run, out, result)]
+    predictors = find_predictors([d for d in training if Path(d).name == "predictor" or (Path(d) / "history.json").is_file()])
+    steering = next((p for p in predictors if p.name == "predictor"), predictors[0] if predictors else None)
+    degenerate = degenerate_guidance(steering, run.episodes)
+    sections = (_results_sections(run, out, result, degenerate) + _training_sections(training, out, result)
+                + [_provenance_section(run, out, result)])
     if videos > 0 and run.episodes is not None:
         if replay is None:
             raise ValueError("videos > 0 needs a replay function")
@@ -114,9 +127,11 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also
         sections.insert(0, Section("Real robot beside the simulation", [_table(real_table, out, result)]))
     sections.insert(0, overview)
     if run.episodes is not None and not is_sweep_records(run):
-        headline = headline_table(run.episodes)
-        sections.insert(0, Section("Headline: Diffusion Policy vs GRITS", [headline_sentence(headline), _table(headline, out, result)]))
-    title = f"GRITS reproduction report: {run.run_dir.resolve().name}"
+        headline = headline_table(run.episodes, degenerate=degenerate)
+        sections.insert(0, Section("Headline: Diffusion Policy vs GRITS", [
+            episodes_sentence(run.episodes), headline_sentence(headline), decision_sentence(headline),
+            _table(headline, out, result), *([steering.line()] if steering else [])]))
+    title = f"GRITS reproduction report: {report_title(run)}"
     result.files.append(_write(out / "report.md", render_markdown(title, sections, out)))
     result.files.append(_write(out / "report.html", render_html(title, sections)))
     result.files.append(_write(out / "report.tex", "\n".join(table_latex(t) for t in result.tables)))
@@ -124,7 +139,29 @@ def build_report(run_dir: str | Path, out_dir: str | Path | None = None, *, also
     return result
 
 
-def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Section]:
+def degenerate_guidance(steering: PredictorQuality | None, episodes: Any) -> str | None:
+    """Why GRITS's guidance had nothing to act on, or None: the predictor run's own verdict
+    (`degenerate_reason` on its validation chunks), else a P(spill) that barely varied across the
+    guided plans of the records (standard deviation below DEGENERATE_SPREAD)."""
+    if steering is not None and steering.degenerate:
+        return steering.degenerate
+    for effect in plan_effect(guided_episodes(episodes)).values():
+        if effect["p_spill_spread"] < DEGENERATE_SPREAD:
+            return (f"its P(spill) barely varies across {effect['method_name']}'s {effect['plans']} plans "
+                    f"(standard deviation {effect['p_spill_spread']:.4f})")
+    return None
+
+
+def report_title(run: RunData) -> str:
+    """The experiment the records name (their `run_id`) and the protocol they ran under; the run's
+    folder only where the records name no experiment."""
+    episodes = run.episodes
+    names = list(dict.fromkeys(episodes["run_id"].dropna().astype(str))) if episodes is not None and "run_id" in episodes.columns else []
+    experiment = ", ".join(names) if names else run.run_dir.resolve().name
+    return f"{experiment}, protocol {protocol_summary(episodes)}" if episodes is not None and len(episodes) else experiment
+
+
+def _results_sections(run: RunData, out: Path, result: ReportResult, degenerate: str | None = None) -> list[Section]:
     episodes = run.episodes
     sections = []
     if episodes is not None and is_sweep_records(run):
@@ -170,7 +207,11 @@ def _results_sections(run: RunData, out: Path, result: ReportResult) -> list[Sec
         guided = guided_episodes(episodes)
         if not guided.empty:
             table = guidance_table(guided)
+            effects = [plan_effect_line(e) + "." for e in plan_effect(guided).values()]
+            if degenerate:
+                effects.insert(0, f"The predictor is degenerate ({degenerate}): {NOTHING_TO_ACT_ON}.")
             sections.append(Section("Guidance: what it changed", [
+                *effects,
                 _table(table, out, result),
                 _figure("guidance", table.title, "Left: the predictor's P(spill) of each guided episode's plans before the first and "
                         "after the last guidance step (lines pair one episode). Right: the guidance displacement per plan.",

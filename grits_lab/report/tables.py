@@ -262,11 +262,14 @@ def claims_table(episodes: pd.DataFrame | None) -> ReportTable:
         for dp_variant, dp_name in dp_variants or [("dp", "Diffusion Policy")]:
             d = outcome_rates(_select(episodes, variant=dp_variant))
             reduction = _relative_reduction(g["spillage"], d["spillage"])
+            # A verdict only where the Wilson intervals are apart; overlapping ones decide nothing either way.
+            n = g["spillage"].n if g["spillage"].n == d["spillage"].n else f"{d['spillage'].n} and {g['spillage'].n}"
             note = ("needs both methods' records" if g["spillage"].missing or d["spillage"].missing
                     else "undefined: no spillage without guidance" if math.isnan(reduction)
-                    else "does not hold" if reduction <= PAPER_SPILLAGE_REDUCTION_VS_DP
-                    else "holds, Wilson intervals separated" if g["spillage"].high < d["spillage"].low
-                    else "holds on the point estimates; Wilson intervals overlap")
+                    else "does not hold: GRITS spilled more, Wilson intervals apart" if d["spillage"].high < g["spillage"].low
+                    else f"undecided at n = {n}: Wilson intervals overlap" if g["spillage"].high >= d["spillage"].low
+                    else "holds, Wilson intervals apart" if reduction > PAPER_SPILLAGE_REDUCTION_VS_DP
+                    else "GRITS spilled less, Wilson intervals apart, by less than the paper's reduction")
             add(f"Spillage reduction, {name} relative to {dp_name}",
                 f"> {100 * PAPER_SPILLAGE_REDUCTION_VS_DP:.0f}%", format_percent(reduction),
                 PAPER_SPILLAGE_REDUCTION_VS_DP, reduction, note)

@@ -81,6 +81,8 @@ def classification_report(prob_spill: np.ndarray, labels: np.ndarray, n_bins: in
         "ece": expected_calibration_error(prob_spill, labels, n_bins),
         "n": int(len(labels)),
         "spill_rate": float(labels.mean()) if len(labels) else float("nan"),
+        "positives": int(labels.sum()),
+        "p_spill_std": float(np.std(prob_spill)) if len(labels) else float("nan"),
     }
 
 
@@ -135,3 +137,25 @@ def paired_bootstrap(
                 out[m][name][r] = (auroc_within(p[idx], labels[idx], by_metric[m][idx]) if m.startswith("auroc_within")
                                    else METRICS[m](p[idx], labels[idx]))
     return out
+
+
+# A predictor whose validation AUROC lies this close to 0.5, or whose P(spill) varies less than this
+# (standard deviation across chunks), gives guidance no direction: its gradient steers at random or not at all.
+DEGENERATE_AUROC_MARGIN = 0.05
+DEGENERATE_SPREAD = 0.01
+
+
+def degenerate_reason(val_auroc: float, spread: float) -> str | None:
+    """Why a predictor cannot steer guidance, in words, or None when it can.
+
+    val_auroc: its validation AUROC (NaN when a class is missing); spread: the standard deviation of
+    its P(spill) across the validation chunks (`p_spill_std` of classification_report). Degenerate:
+    AUROC undefined or within DEGENERATE_AUROC_MARGIN of 0.5, or a spread below DEGENERATE_SPREAD.
+    """
+    if not np.isfinite(val_auroc):
+        return "its validation AUROC is undefined (one class has no chunk)"
+    if abs(val_auroc - 0.5) < DEGENERATE_AUROC_MARGIN:
+        return f"its validation AUROC is {val_auroc:.2f}, chance level"
+    if spread < DEGENERATE_SPREAD:
+        return f"its P(spill) barely varies across chunks (standard deviation {spread:.4f})"
+    return None

@@ -150,8 +150,12 @@ class PredictorTrainConfig:
     batch_size: int = 96
     lr: float = 1e-3
     weight_decay: float = 0.0
-    # Positive-class weight of the cross-entropy is left at 1: the paper balances the dataset
-    # (2,000 spill / 2,000 no spill) and a reweighted loss would bias the calibration guidance uses.
+    # Class weights of the cross-entropy (docs/predictor.md, "Class weighting"). "none": every chunk
+    # weighs 1, as the paper, whose dataset is balanced by trial (2,000 spill / 2,000 no spill).
+    # "balanced": each class weighs n / (2 n_class) over the training chunks, so a set where few
+    # chunks spill cannot be fit by predicting "no spill" everywhere; P(spill) is then calibrated to
+    # a 50 % prior instead of the training set's share of spilling chunks.
+    class_weight: Literal["none", "balanced"] = "none"
     seed: int = 0
     num_threads: int = 2
     select_metric: Literal["val_loss", "val_auroc"] = "val_loss"

@@ -30,7 +30,7 @@ from grits_lab.seeding import derive_seed
 from grits_lab.spillage.predictor_checkpoint import TrainedPredictor, read_checkpoint, save_predictor
 from grits_lab.spillage.predictor_config import PredictorConfig
 from grits_lab.spillage.chunk_dataset import CLOUD_KEYS, EpisodeSplit, SpillageChunkDataset, check_spillage_dataset, fit_normalizers, split_training_datasets
-from grits_lab.spillage.classifier_metrics import classification_report
+from grits_lab.spillage.classifier_metrics import classification_report, degenerate_reason
 from grits_lab.training.metrics_log import MetricLogger
 from grits_lab.spillage.model import CloudNormalizer, SpillagePredictor
 from grits_lab.training.metrics_log import require_finite_loss
@@ -47,7 +47,23 @@ def _resume_fingerprint(config: PredictorConfig) -> str:
     del described["train"]["tracking"]  # where the metrics are shown, not what is trained
     if described["data"]["label"] == "chunk":  # the only label before the key existed: those runs still resume
         del described["data"]["label"]
+    if described["train"]["class_weight"] == "none":  # likewise for runs from before class weighting
+        del described["train"]["class_weight"]
     return config_fingerprint(described)
+
+
+def class_weights(labels: np.ndarray, mode: str) -> torch.Tensor | None:
+    """Cross-entropy weights (no spill, spill) for `train.class_weight`: None for "none"; for "balanced"
+    n / (2 n_c) over `labels` (shape (N,), 0/1), so each class carries half the loss. InputError when a
+    class is absent (nothing to balance)."""
+    if mode == "none":
+        return None
+    labels = np.asarray(labels).astype(np.int64).reshape(-1)
+    counts = np.bincount(labels, minlength=2)[:2]
+    if (counts == 0).any():
+        raise InputError(f"train.class_weight: balanced needs both classes in the training chunks; got {counts[0]} safe "
+                         f"and {counts[1]} spilling")
+    return torch.tensor(len(labels) / (2.0 * counts), dtype=torch.float32)
 
 
 def _loader(dataset: SpillageChunkDataset, batch_size: int) -> DataLoader:
@@ -55,19 +71,22 @@ def _loader(dataset: SpillageChunkDataset, batch_size: int) -> DataLoader:
     return DataLoader(dataset, batch_size=batch_size, num_workers=0)
 
 
-def predict(model: SpillagePredictor, dataset: SpillageChunkDataset, batch_size: int = 256) -> tuple[np.ndarray, np.ndarray, float]:
-    """P(spill) and labels over the dataset in its (fixed) order, and the mean cross-entropy."""
+def predict(model: SpillagePredictor, dataset: SpillageChunkDataset, batch_size: int = 256,
+            weight: torch.Tensor | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """P(spill) and labels over the dataset in its (fixed) order, and the mean cross-entropy (with
+    class weights `weight` (2,), the weighted mean, as the training loss takes it)."""
     model.eval()
-    probs, labels, losses = [], [], []
+    probs, labels, losses, weights = [], [], [], []
     with torch.no_grad():
         for traj, cloud, label in _loader(dataset, batch_size):
             logits = model(traj, cloud)
-            losses.append(torch.nn.functional.cross_entropy(logits, label, reduction="sum").item())
+            losses.append(torch.nn.functional.cross_entropy(logits, label, weight=weight, reduction="sum").item())
+            weights.append(float(weight[label].sum()) if weight is not None else float(len(label)))
             probs.append(torch.softmax(logits, dim=-1)[:, 1].numpy())
             labels.append(label.numpy())
     p = np.concatenate(probs) if probs else np.zeros(0)
     y = np.concatenate(labels) if labels else np.zeros(0)
-    return p, y, float(sum(losses) / max(len(y), 1))
+    return p, y, float(sum(losses) / max(sum(weights), 1e-12))
 
 
 def _untimed(history: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -134,6 +153,7 @@ def _train_in(out: Path, config: PredictorConfig, dataset_dir: Path, split: Epis
     train_eval_set._cache = train_set._cache  # one decoded copy of each training episode
     val_set = SpillageChunkDataset(dataset_dir, split.val, shuffle=False, **common)
     n_train = len(train_set.labels())
+    weight = class_weights(train_set.labels(), config.train.class_weight)
 
     logger = MetricLogger(out, namespace="predictor", resume_step=start_epoch, title=f"predictor {out.name}",  # one step per epoch
                           tracking=config.train.tracking, params=config_to_dict(config))
@@ -145,7 +165,7 @@ def _train_in(out: Path, config: PredictorConfig, dataset_dir: Path, split: Epis
         total, seen = 0.0, 0
         bar = tqdm(total=n_train, desc=f"epoch {epoch + 1}/{config.train.epochs}", unit="chunk", disable=not progress, leave=False)
         for traj, cloud, label in _loader(train_set, config.train.batch_size):
-            loss = torch.nn.functional.cross_entropy(model(traj, cloud), label)
+            loss = torch.nn.functional.cross_entropy(model(traj, cloud), label, weight=weight)
             require_finite_loss(loss, f"epoch {epoch + 1}, chunk {seen + len(label)} of {n_train}", last_path)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
@@ -155,8 +175,8 @@ def _train_in(out: Path, config: PredictorConfig, dataset_dir: Path, split: Epis
             bar.update(len(label))
             bar.set_postfix(loss=f"{total / seen:.4f}")
         bar.close()
-        p_tr, y_tr, loss_tr = predict(model, train_eval_set)
-        p_va, y_va, loss_va = predict(model, val_set)
+        p_tr, y_tr, loss_tr = predict(model, train_eval_set, weight=weight)
+        p_va, y_va, loss_va = predict(model, val_set, weight=weight)
         row = {"epoch": epoch + 1, "train_loss": loss_tr, "val_loss": loss_va, "seconds": time.perf_counter() - t0}
         row.update({f"train_{k}": v for k, v in classification_report(p_tr, y_tr, config.train.ece_bins).items()})
         row.update({f"val_{k}": v for k, v in classification_report(p_va, y_va, config.train.ece_bins).items()})
@@ -181,7 +201,10 @@ def _train_in(out: Path, config: PredictorConfig, dataset_dir: Path, split: Epis
             )
     logger.close()
     best = min(history, key=lambda r: r["val_loss"] if config.train.select_metric == "val_loss" else -r["val_auroc"]) if history else {}
-    return {"run_dir": str(out), "best_checkpoint": str(best_path), "last_checkpoint": str(last_path), "best_epoch": best}
+    summary = {"run_dir": str(out), "best_checkpoint": str(best_path), "last_checkpoint": str(last_path), "best_epoch": best}
+    if "val_p_spill_std" in best:  # rows of runs from before the spread was logged have none
+        summary["degenerate"] = degenerate_reason(best["val_auroc"], best["val_p_spill_std"])
+    return summary
 
 
 STRATA = ("food", "shape")  # the index column predict_chunks copies to each chunk, the first one present
@@ -245,4 +268,6 @@ def evaluate_predictor(predictor: TrainedPredictor, dataset_dir: str | Path, fil
     label = scoring_label(label, predictor.config.data.label)
     frame, loss = predict_chunks(predictor, dataset_dir, files, label)
     return {"dataset": str(dataset_dir), "label": label, "trained_on": predictor.config.data.label, "loss": loss,
+            "episodes": int(frame["episode"].nunique()), "episodes_spilling": int(frame.groupby("episode")["label"].max().sum()),
+            "mean_p_spill": float(frame["p_spill"].mean()) if len(frame) else float("nan"),
             **classification_report(frame["p_spill"].to_numpy(), frame["label"].to_numpy(), n_bins)}

@@ -24,7 +24,7 @@ def run_sweep(config: StudyConfig, n_trials: int | None = None, storage: str | N
     from grits_lab.tune.grits_binding import GritsEvaluator
     from grits_lab.tune.objective import make_evaluator
     from grits_lab.tune.outputs import write_outputs
-    from grits_lab.tune.reference import run_references
+    from grits_lab.tune.reference import carry_references, run_references
     from grits_lab.tune.storage import open_storage
     from grits_lab.tune.study import EVALUATOR_ATTR, open_study, run_trials
     from grits_lab.tune.synthetic import SyntheticEvaluator
@@ -53,6 +53,7 @@ def run_sweep(config: StudyConfig, n_trials: int | None = None, storage: str | N
               file=sys.stderr)
         try:
             run_references(config, evaluator, out_dir / "records")
+            carry_references(study, config, out_dir / "records")
             run_trials(config, study, storage_obj, evaluator, records_dir=out_dir / "records",
                        progress=progress,
                        after_trial=lambda st: write_outputs(st, config, out_dir, where, label, plots=False))

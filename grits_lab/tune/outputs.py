@@ -99,7 +99,9 @@ def best_trial(study: optuna.Study, config: StudyConfig) -> tuple[FrozenTrial | 
 
     Feasible trials (spillage_rate <= max_spillage, when set) first; in multi-objective mode the
     choice is made on the Pareto front; ties in success - spillage_weight * spillage go to the
-    earlier trial.
+    trial whose guidance lowered the predictor's median P(spill) of its validation plans the most
+    (`p_spill_change`: a handful of episodes often ties on outcomes, and a guidance that does not
+    move P(spill) has not acted), then to the earlier trial.
     """
     complete = scored_trials(study)
     if not complete:
@@ -113,7 +115,12 @@ def best_trial(study: optuna.Study, config: StudyConfig) -> tuple[FrozenTrial | 
             note += f"; NO trial met spillage <= {config.objective.max_spillage:g}"
     if config.objective.mode == "multi":
         pool, note = pareto_front(pool), note + " on the Pareto front"
-    return max(pool, key=lambda t: (_score(t, config), -t.number)), note
+    def lowered(t: FrozenTrial) -> float:
+        change = t.user_attrs.get("p_spill_change")
+        return -round(float(change), 6) if change is not None and math.isfinite(change) else -math.inf
+
+    return max(pool, key=lambda t: (_score(t, config), lowered(t), -t.number)), note + \
+        "; ties to the larger drop in median P(spill)"
 
 
 def default_trial(study: optuna.Study, config: StudyConfig) -> FrozenTrial | None:

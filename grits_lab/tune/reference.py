@@ -19,7 +19,7 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import pandas as pd
 
@@ -29,6 +29,9 @@ from grits_lab.io import save_parquet_atomic
 from grits_lab.tune.objective import EpisodeEvaluator, check_records, scored_outcomes, summarize_records
 from grits_lab.tune.study import trial_records_path
 from grits_lab.tune.study_config import StudyConfig
+
+if TYPE_CHECKING:
+    import optuna
 
 REFERENCE_PREFIX = "reference_"
 REFERENCE_FILE = "reference.csv"
@@ -90,6 +93,24 @@ def run_references(config: StudyConfig, evaluator: EpisodeEvaluator, records_dir
             f"({m.n_episodes} episodes, {time.perf_counter() - start:.1f} s)")
         ran.append(method)
     return ran
+
+
+REFERENCE_ATTR_PREFIX = "reference:"
+
+
+def carry_references(study: "optuna.Study", config: StudyConfig, records_dir: Path) -> dict[str, dict]:
+    """Store the rates of each stored reference (`load_references`) in the study itself, as user
+    attribute `reference:<method>` ({success_rate, spillage_rate, scoop_failure_rate, n_episodes,
+    n_errors} over the validation episodes), so that whoever reads the storage (optuna-dashboard,
+    another machine's sweep) sees the unguided baseline beside the trials' objective values.
+    Returns {method: rates}. Not part of the study's identity."""
+    found, _ = load_references(config, records_dir)
+    carried = {}
+    for method, records in found.items():
+        carried[method] = summarize_records(records).as_attrs()
+        if study.user_attrs.get(REFERENCE_ATTR_PREFIX + method) != carried[method]:
+            study.set_user_attr(REFERENCE_ATTR_PREFIX + method, carried[method])
+    return carried
 
 
 def load_references(config: StudyConfig, records_dir: Path) -> tuple[dict[str, pd.DataFrame], dict[str, str]]:

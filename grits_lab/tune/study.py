@@ -66,6 +66,22 @@ class WorkerIdentity:
         return cls(parts[0], int(parts[1]), parts[2])
 
 
+# What guidance did on a trial's validation plans (records.plan_guidance_effect), kept with the trial:
+# the best point's tie-break (tune/outputs.py, `best_trial`) and a column optuna-dashboard shows.
+GUIDANCE_ATTRS = {"p_spill_change": "relative_change", "displacement_mm": "displacement_mm"}
+
+
+def guidance_attrs(records) -> dict[str, float]:
+    """{p_spill_change, displacement_mm} of a trial's records, where they compared their plans with the
+    unguided sample; empty otherwise."""
+    from grits_lab.records import plan_guidance_effect
+
+    effect = plan_guidance_effect(records)
+    if effect is None:
+        return {}
+    return {attr: float(effect[key]) for attr, key in GUIDANCE_ATTRS.items() if effect[key] == effect[key]}
+
+
 def trial_records_path(records_dir: Path, number: int) -> Path:
     """Where trial `number`'s episode records are kept: `records_dir/trial_NNNNN.parquet`."""
     return Path(records_dir) / f"trial_{number:05d}.parquet"
@@ -276,6 +292,8 @@ def run_trials(
                 save_parquet_atomic(trial_records_path(records_dir, trial.number), records)
             try:
                 for key, value in metrics.as_attrs().items():
+                    trial.set_user_attr(key, value)
+                for key, value in guidance_attrs(records).items():
                     trial.set_user_attr(key, value)
                 trial.set_user_attr("duration_s", time.perf_counter() - start)
                 study.tell(trial, values)

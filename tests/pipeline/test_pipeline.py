@@ -95,8 +95,43 @@ def test_the_sweep_stage_keeps_the_sweep_files_evaluation_overrides(tmp_path):
     wired = yaml.safe_load(stage_config_text("sweep", config, layout))
     evaluation = wired["evaluation"]
     assert evaluation["overrides"] == {"guidance": {"step": "normalized"}}  # rho is tuned on the step the file names
-    assert evaluation["config"] == str(layout.configs / "evaluate.yaml")  # the pipeline's own links win
+    assert evaluation["config"] == str(layout.sweep_evaluation_config)  # the pipeline's own links win
     assert all(str(tmp_path) in path for path in evaluation["checkpoints"])
+
+
+def test_the_quickstarts_evaluation_runs_with_its_sweeps_best_point(tmp_path):
+    from grits_lab.config import load_yaml
+    from grits_lab.pipeline.pipeline_run import stage_config_text
+    from grits_lab.pipeline.stages import Layout
+
+    data = load_yaml("experiments/quickstart.yaml")
+    data["output_dir"] = str(tmp_path / "quick")
+    config = load_pipeline_config(_write(tmp_path / "p.yaml", data))
+    stages = config.ordered_stages()
+    assert "sweep" in stages and stages.index("sweep") < stages.index("evaluate")
+    layout = Layout(tmp_path / "quick")
+    sweep = yaml.safe_load(stage_config_text("sweep", config, layout))
+    assert sweep["evaluation"]["config"] == str(layout.sweep_evaluation_config)
+    assert sweep["objective"]["mode"] == "multi" and sweep["reference"] == ["dp"]
+    assert sweep["enqueue"][0] == {"rho": 2.5, "s": 30}  # the paper's defaults run first
+    untuned = yaml.safe_load(stage_config_text("evaluate", config, layout))
+    episodes = {(e.food, e.level, e.seed) for e in load_study_config_from(sweep, tmp_path)}
+    assert untuned["seed"] != sweep["validation"]["seed"] and episodes  # the sweep tunes on its own seeds
+    layout.sweep_dir.mkdir(parents=True)
+    (layout.sweep_dir / "best.yaml").write_text("# trial 3\nguidance: {rho: 0.7, s: 18}\n")
+    tuned = yaml.safe_load(stage_config_text("evaluate", config, layout))
+    assert (tuned["guidance"]["rho"], tuned["guidance"]["s"]) == (0.7, 18)
+    assert {k: v for k, v in tuned["guidance"].items() if k not in ("rho", "s")} == \
+        {k: v for k, v in untuned["guidance"].items() if k not in ("rho", "s")}
+    assert yaml.safe_load(stage_config_text("evaluate", config, layout, tuned=False))["guidance"] == untuned["guidance"]
+
+
+def load_study_config_from(sweep: dict, tmp_path):
+    """The validation episodes of a wired sweep mapping, read against the quickstart's evaluation config."""
+    from grits_lab.tune.study_config import load_study_config
+
+    data = {**sweep, "evaluation": {**sweep["evaluation"], "config": "experiments/evaluate_quick.yaml"}}
+    return load_study_config(_write(tmp_path / "sweep.yaml", data)).episodes()
 
 
 @pytest.mark.parametrize("stage, overrides, fragment", [
@@ -254,3 +289,20 @@ def test_a_changed_stage_removes_its_own_outputs_but_never_what_a_link_points_at
     remove_outputs([stage / "demos", stage / "spillage", stage / "episodes.parquet", stage / "absent"])
     assert not any(stage.iterdir())
     assert (kept / "episode.npz").read_bytes() == b"data"
+
+
+def test_the_closing_summary_names_the_sweeps_best_point_its_front_and_the_reference(tmp_path):
+    from grits_lab.pipeline.closing import closing_lines
+    from grits_lab.pipeline.stages import Layout
+
+    layout = Layout(tmp_path / "quick")
+    layout.sweep_dir.mkdir(parents=True)
+    point = {"trial": 1, "rho": 0.8, "s": 24, "success_rate": 0.75, "spillage_rate": 0.0}
+    summary = {"best": point, "episodes_per_trial": 4, "pareto_front": [point],
+               "reference": {"dp": {"success_rate": 0.5, "spillage_rate": 0.25}}, "dashboard": "optuna-dashboard J"}
+    (layout.sweep_dir / "summary.json").write_text(json.dumps(summary))
+    lines = closing_lines(layout, ["sweep"])
+    assert lines == ["sweep: best rho 0.8, s 24 (trial 1: success 0.75, spillage 0.00 over 4 validation episodes; dp on the "
+                     "same episodes: success 0.50, spillage 0.25); Pareto front: rho 0.8 s 24 (success 0.75, spillage 0.00); "
+                     "optuna-dashboard J"]
+    assert closing_lines(layout, ["demos"]) == []  # nothing for stages this pipeline lacks

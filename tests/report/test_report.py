@@ -111,12 +111,12 @@ def test_claims_compare_spillage_reduction_with_the_paper(records):
     claims = claims_table(records).data.set_index("quantity")
     reduction = claims.loc["Spillage reduction, GRITS relative to Diffusion Policy"]
     assert reduction["simulation"] == pytest.approx(1 - (1 / 14) / (3 / 10))
-    # 1/14 against 3/10: a reduction beyond the paper's 40 %, on intervals that overlap
-    assert reduction["note"] == "holds on the point estimates; Wilson intervals overlap"
+    # 1/14 against 3/10: a reduction beyond the paper's 40 %, on intervals that overlap: no verdict
+    assert reduction["note"] == "undecided at n = 10 and 14: Wilson intervals overlap"
     assert claims.loc["Diffusion Policy (Post.): spillage", "note"] == "no simulated episodes"
 
 
-def test_a_spillage_reduction_is_called_separated_only_when_the_wilson_intervals_are():
+def test_a_spillage_reduction_gets_a_verdict_only_when_the_wilson_intervals_are_apart():
     def claim(grits_spills: int, dp_spills: int) -> str:
         rows = [episode(m, "sago", "low" if i < 20 else "high", i % 20, "spill" if i < spills else "success")
                 for m, spills in (("grits", grits_spills), ("dp", dp_spills)) for i in range(40)]
@@ -124,11 +124,26 @@ def test_a_spillage_reduction_is_called_separated_only_when_the_wilson_intervals
         return claims.loc["Spillage reduction, GRITS relative to Diffusion Policy", "note"]
 
     # 1/40 [0.4 %, 12.9 %] against 20/40 [35.2 %, 64.8 %]: apart
-    assert claim(1, 20) == "holds, Wilson intervals separated"
+    assert claim(1, 20) == "holds, Wilson intervals apart"
     # 5/40 [5.5 %, 26.1 %] against 10/40 [14.2 %, 40.2 %]: a 50 % reduction whose intervals overlap
-    assert claim(5, 10) == "holds on the point estimates; Wilson intervals overlap"
-    # 8/40 against 10/40: 20 %, short of the paper's 40 %
-    assert claim(8, 10) == "does not hold"
+    assert claim(5, 10) == "undecided at n = 40: Wilson intervals overlap"
+    # 8/40 against 10/40: 20 %, short of the paper's 40 %, and overlapping: still no verdict
+    assert claim(8, 10) == "undecided at n = 40: Wilson intervals overlap"
+    # 1 of 4 against 1 of 4, the first screen of a small run: nothing decided
+    assert claim_at(1, 1, 4) == "undecided at n = 4: Wilson intervals overlap"
+    # 20/40 against 1/40: GRITS spilled more, apart
+    assert claim(20, 1) == "does not hold: GRITS spilled more, Wilson intervals apart"
+    # 22/40 [39.8 %, 69.3 %] against 40/40 [91.2 %, 100 %]: apart, a 45 % reduction (the paper's is > 40 %)
+    assert claim(22, 40) == "holds, Wilson intervals apart"
+    # 30/40 [59.8 %, 85.8 %] against 40/40: apart, but a 25 % reduction
+    assert claim(30, 40) == "GRITS spilled less, Wilson intervals apart, by less than the paper's reduction"
+
+
+def claim_at(grits_spills: int, dp_spills: int, n: int) -> str:
+    rows = [episode(m, "sago", "low", i, "spill" if i < spills else "success")
+            for m, spills in (("grits", grits_spills), ("dp", dp_spills)) for i in range(n)]
+    claims = claims_table(normalize_records(pd.DataFrame(rows))).data.set_index("quantity")
+    return claims.loc["Spillage reduction, GRITS relative to Diffusion Policy", "note"]
 
 
 def test_failure_table_counts_each_episode_once_at_the_stage_that_ended_it():

@@ -189,7 +189,7 @@ def test_every_rate_is_rounded_one_way_halves_up():
     assert format_percent(5 / 8) == "62.5%" and format_percent(1 / 16) == "6.3%" and format_percent(0.145) == "14.5%"
     rows = [episode("grits", "sago", "low", i, "success" if i < 5 else "spill") for i in range(8)]
     headline = headline_table(normalize_records(pd.DataFrame(rows))).display.set_index("Method")
-    assert headline.loc["GRITS", "Task success"] == "62.5% (5/8)"
+    assert headline.loc["GRITS", "Task success"] == format_rate(rate(5, 8)) == "62.5% [30.6, 86.3] (5/8)"
     assert format_rate(rate(5, 8)).startswith("62.5% [")
 
 

@@ -16,9 +16,9 @@ BOWL_CENTRE = np.array([0.5, 0.0, 0.05])
 
 
 def write_tiny_spillage_dataset(root: Path, n_episodes: int = 12, n_points: int = 48, n_chunks: int = 3, seed: int = 0, n_action_steps: int = 12,
-                                horizon: bool = False) -> Path:
+                                horizon: bool = False, spill_below: float = 0.015) -> Path:
     """Episodes whose chunk label depends on trajectory and cloud together: a chunk spills when
-    the spoon dips deeper than 1.5 cm below the top of the food pile. With `horizon`, also the
+    the spoon dips deeper than `spill_below` (1.5 cm; of dips up to 5 cm) below the top of the food pile. With `horizon`, also the
     horizon labels: every third episode sheds its load in a carry after the last chunk, so all its
     chunks are horizon-positive; otherwise a chunk is horizon-positive when it or a later one spilled."""
     rng = np.random.default_rng(seed)
@@ -33,7 +33,7 @@ def write_tiny_spillage_dataset(root: Path, n_episodes: int = 12, n_points: int 
         xyz = np.stack([BOWL_CENTRE[0] + rng.uniform(-0.03, 0.03, t), BOWL_CENTRE[1] + rng.uniform(-0.03, 0.03, t), z], 1)
         trajectory = np.concatenate([xyz, np.repeat(rot[None], t, 0)], 1).astype(np.float32)
         starts = np.arange(n_chunks, dtype=np.int32) * n_action_steps
-        spilled = np.array([trajectory[s : s + n_action_steps, 2].min() < food_top - 0.015 for s in starts])
+        spilled = np.array([trajectory[s : s + n_action_steps, 2].min() < food_top - spill_below for s in starts])
         clouds = []
         for c in range(n_chunks):
             food = BOWL_CENTRE + rng.uniform([-0.05, -0.05, 0.0], [0.05, 0.05, food_top - BOWL_CENTRE[2]], (n_points, 3))

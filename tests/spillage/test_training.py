@@ -15,7 +15,7 @@ import yaml
 
 from grits_lab.cli import main
 from grits_lab.config import config_from_dict, config_to_dict
-from grits_lab.data.format import load_index, read_episode
+from grits_lab.data.format import list_episode_files, load_index, read_episode
 from grits_lab.errors import ConfigError, InputError
 from grits_lab.spillage.predictor_checkpoint import load_predictor
 from grits_lab.spillage.predictor_config import PredictorConfig
@@ -311,7 +311,7 @@ def test_a_chunk_label_run_keeps_the_resume_fingerprint_of_runs_made_before_the_
 
     cfg = _config(tmp_path, tiny_dataset)
     before = config_to_dict(cfg)
-    del before["train"]["epochs"], before["data"]["label"], before["train"]["tracking"]  # runs before both keys
+    del before["train"]["epochs"], before["data"]["label"], before["train"]["tracking"], before["train"]["class_weight"]  # runs before these keys
     assert _resume_fingerprint(cfg) == config_fingerprint(before)
     cfg.train.tracking.experiment = "elsewhere"  # where the metrics are shown does not stop a resume
     assert _resume_fingerprint(cfg) == config_fingerprint(before)
@@ -398,3 +398,73 @@ def test_cli_refuses_unusable_dataset_paths_in_one_line_before_any_epoch(tmp_pat
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and expected in err[0], (second[:20], err)
     assert not (tmp_path / "runs").exists()
+
+
+def test_balanced_class_weights_give_each_class_half_the_loss_and_need_both_classes():
+    import torch
+
+    from grits_lab.spillage.predictor_training import class_weights
+
+    labels = np.array([0] * 9 + [1])
+    weight = class_weights(labels, "balanced")
+    assert torch.allclose(weight, torch.tensor([10 / 18, 10 / 2]))
+    assert float(weight[0] * 9) == pytest.approx(float(weight[1] * 1))  # each class carries half
+    assert class_weights(labels, "none") is None
+    with pytest.raises(InputError, match="train.class_weight: balanced needs both classes"):
+        class_weights(np.zeros(5), "balanced")
+
+
+def test_balanced_class_weights_lift_p_spill_towards_an_even_prior_on_a_set_where_few_spill(tmp_path):
+    """Few spilling chunks: with balanced weights each class carries half the loss, so the trained
+    P(spill) sits nearer a 50 % prior than the unweighted run's, which follows the set's share of
+    spills; both rank the spilling chunks first, and the history logs the positives and the spread."""
+    from tests.spillage.conftest import write_tiny_spillage_dataset
+
+    dataset = write_tiny_spillage_dataset(tmp_path / "rare", n_episodes=16, n_chunks=4, seed=3, spill_below=0.04)
+    labels = np.concatenate([read_episode(p)[0]["chunk_spilled"] for p in list_episode_files(dataset)])
+    assert 0 < labels.mean() < 0.25
+    scores = {}
+    for mode in ("none", "balanced"):
+        cfg = _config(tmp_path / mode, dataset, epochs=25)
+        cfg.train.class_weight = mode
+        cfg.model.dropout = 0.0
+        result = train_predictor(cfg, progress=False)
+        scores[mode] = evaluate_predictor(load_predictor(result["best_checkpoint"]), dataset)
+        last = json.loads((tmp_path / mode / "runs" / "tiny" / "history.json").read_text())[-1]
+        assert last["train_positives"] == int(round(last["train_n"] * last["train_spill_rate"])) and last["train_p_spill_std"] > 0
+    assert scores["balanced"]["mean_p_spill"] > scores["none"]["mean_p_spill"] + 0.05
+    assert scores["balanced"]["auroc"] > 0.8 and scores["balanced"]["positives"] == int(labels.sum())
+
+
+def test_the_weighted_loss_is_the_weighted_mean_cross_entropy(tiny_dataset):
+    import torch
+
+    from grits_lab.spillage.chunk_dataset import CLOUD_KEYS, SpillageChunkDataset, fit_normalizers
+    from grits_lab.spillage.model import SpillagePredictor
+    from grits_lab.spillage.predictor_training import predict
+
+    cfg = config_from_dict(PredictorConfig, {"model": {"dp3": {"hidden_dims": [16], "out_dim": 8}}})
+    files = sorted(load_index(tiny_dataset)["file"])
+    action_norm, cloud_norm = fit_normalizers(tiny_dataset, files, CLOUD_KEYS["composite"], 0.1)
+    data = SpillageChunkDataset(tiny_dataset, files, cloud_key=CLOUD_KEYS["composite"], n_action_steps=12, action_normalizer=action_norm,
+                                cloud_normalizer=cloud_norm, points_per_object=32, shuffle=False, seed=0, cache=False)
+    torch.manual_seed(0)
+    model = SpillagePredictor(cfg.model)
+    weight = torch.tensor([0.25, 3.0])
+    p, y, plain = predict(model, data)
+    _, _, weighted = predict(model, data, weight=weight)
+    ce = -np.log(np.where(y == 1, p, 1 - p))
+    w = np.where(y == 1, 3.0, 0.25)
+    assert plain == pytest.approx(ce.mean(), rel=1e-4) and weighted == pytest.approx((w * ce).sum() / w.sum(), rel=1e-4)
+
+
+def test_runs_without_class_weights_keep_their_resume_fingerprint(tmp_path, tiny_dataset):
+    from grits_lab.config import config_fingerprint
+    from grits_lab.spillage.predictor_training import _resume_fingerprint
+
+    cfg = _config(tmp_path, tiny_dataset)
+    before = config_to_dict(cfg)
+    del before["train"]["epochs"], before["data"]["label"], before["train"]["class_weight"], before["train"]["tracking"]
+    assert _resume_fingerprint(cfg) == config_fingerprint(before)
+    cfg.train.class_weight = "balanced"
+    assert _resume_fingerprint(cfg) != config_fingerprint(before)

@@ -157,6 +157,39 @@ def test_the_best_of_two_front_trials_with_equal_scores_is_the_earlier_one(sweep
     assert best.number == 0 and "Pareto front" in note
 
 
+def test_trials_tied_on_outcomes_go_to_the_one_whose_guidance_lowered_p_spill_most(sweep_file):
+    import optuna
+
+    from grits_lab.tune.outputs import best_trial
+
+    config = load_study_config(sweep_file(objective={"mode": "multi"}))
+    study = optuna.create_study(directions=["maximize", "minimize"])
+    distributions = {"rho": optuna.distributions.FloatDistribution(0.05, 30.0, log=True),
+                     "s": optuna.distributions.IntDistribution(0, 90, step=6)}
+    for rho, change in ((2.5, -0.01), (12.0, -0.15), (0.3, None)):  # all three: success 1.0, spillage 0.0
+        attrs = {"success_rate": 1.0, "spillage_rate": 0.0, **({"p_spill_change": change} if change is not None else {})}
+        study.add_trial(optuna.trial.create_trial(params={"rho": rho, "s": 30}, distributions=distributions,
+                                                  values=[1.0, 0.0], user_attrs=attrs))
+    study.add_trial(optuna.trial.create_trial(params={"rho": 20.0, "s": 30}, distributions=distributions, values=[0.75, 0.0],
+                                              user_attrs={"success_rate": 0.75, "spillage_rate": 0.0, "p_spill_change": -0.4}))
+    best, note = best_trial(study, config)
+    assert best.number == 1 and "larger drop in median P(spill)" in note  # outcomes first: trial 3 failed a scoop
+
+
+def test_a_trials_guidance_effect_is_the_median_over_every_compared_plan():
+    import numpy as np
+    import pandas as pd
+
+    from grits_lab.tune.study import guidance_attrs
+
+    records = pd.DataFrame({"plan_p_spill_unguided": [np.array([0.5, 0.4]), np.array([0.6])],
+                            "plan_p_spill_guided": [np.array([0.4, 0.3]), np.array([0.5])],
+                            "plan_displacement_mm": [np.array([1.0, 3.0]), np.array([2.0])]})
+    attrs = guidance_attrs(records)
+    assert np.isclose(attrs["p_spill_change"], (0.4 - 0.5) / 0.5) and attrs["displacement_mm"] == 2.0
+    assert guidance_attrs(pd.DataFrame({"task_success": [True]})) == {}  # unguided records carry no plans
+
+
 def test_override_files_carry_the_sweeps_evaluation_overrides_with_the_trials_rho_and_s(sweep_file, tmp_path):
     from grits_lab.evaluation.evaluation_config import load_evaluation_config
 

@@ -83,7 +83,7 @@ SHIPPED_EPISODES = {
     "grits_cpu": (20, "5d2806b57e171b49", "25d72b44589cfd3d"),
     "grits_cpu_normalized": (20, "5d2806b57e171b49", "a2531b9be33b233d"),
     "grits_paper": (50, "48430c570614e2a0", "33355baaa34cf9b4"),
-    "grits_quick": (12, "1c0af4685854e532", "db395eec8b9a3536"),
+    "grits_quick": (4, "32f285648b1b6d72", "145d59ced4e0bd92"),  # remade as the quickstart's sweep: a new study
     "synthetic_standin": (24, "b9291626d2bf9833", "2d9396727413733a"),
 }
 

@@ -80,6 +80,15 @@ def test_the_reference_runs_once_before_the_trials_and_each_trial_is_paired_with
     assert block["n_episodes"] == len(config.episodes())
     assert block["spillage_rate"] == pytest.approx(reference["spillage"].mean())
     assert {r["trial"] for r in block["front"]} == {t["trial"] for t in summary["pareto_front"]}
+    # the study itself carries the reference's rates, so that a reader of the storage (optuna-dashboard) shows them
+    import optuna
+
+    from grits_lab.tune.storage import open_storage
+    storage, _ = open_storage(config.storage, config.study_dir / "journal.log")
+    carried = optuna.load_study(study_name=config.study_name, storage=storage).user_attrs["reference:dp"]
+    assert carried["spillage_rate"] == pytest.approx(reference["spillage"].mean())
+    assert carried["success_rate"] == pytest.approx(reference["task_success"].mean())
+    assert carried["n_episodes"] == len(config.episodes())
     best_yaml = (config.study_dir / "best.yaml").read_text()
     assert f"against dp on {len(config.episodes())} paired episodes" in best_yaml
     assert yaml.safe_load(best_yaml)["guidance"]["rho"] == pytest.approx(summary["best"]["rho"])
