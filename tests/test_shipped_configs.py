@@ -12,8 +12,9 @@ STUDIES = ROOT / "studies"
 SHIPPED = sorted((ROOT / "experiments").glob("*.yaml")) + sorted(STUDIES.glob("*/configs/*.yaml"))
 
 
-def _loader(path: Path):
-    from grits_lab.config import load_config, load_yaml
+def _loaders() -> dict:
+    """Every stage's config loader, by the kind of config it reads."""
+    from grits_lab.config import load_config
     from grits_lab.collection.jobs import load_collect_config
     from grits_lab.evaluation.evaluation_config import load_evaluation_config
     from grits_lab.pipeline.pipeline_config import load_pipeline_config
@@ -22,29 +23,42 @@ def _loader(path: Path):
     from grits_lab.spillage.predictor_config import PredictorConfig
     from grits_lab.tune.study_config import load_study_config
 
-    name = path.name
-    if path.parent.name == "sweeps" or "study_name" in load_yaml(path):
-        return load_study_config
-    data = load_yaml(path)
-    if "stages" in data:
-        return load_pipeline_config
-    if data.get("kind") in ("demos", "spillage"):
-        return load_collect_config
-    if name.startswith("evaluate") or "methods" in data:
-        return load_evaluation_config
-    if name.startswith(("transfer_", "sim_", "scoop_", "guide_")):  # an override of the transfer, the world, the scoop or the guide, merged onto the protocol
+    return {"sweep": load_study_config, "pipeline": load_pipeline_config, "collect": load_collect_config,
+            "evaluation": load_evaluation_config, "policy": load_train_config, "bc": load_bc_config,
+            "predictor": lambda p: load_config(p, PredictorConfig)}
+
+
+def _kind(path: Path) -> str:
+    """The one kind of config `path` is, told by which loader accepts it (never by its file name):
+    "override" when none does alone and it loads merged onto the protocol's evaluation config (a
+    study's change of the transfer, the world, the guide or the runs' names). AssertionError when
+    two loaders accept it (an ambiguous config) or none does even merged."""
+    from grits_lab.config import load_yaml
+    from grits_lab.errors import GritsError
+    from grits_lab.evaluation.evaluation_config import load_evaluation_config
+
+    accepted = []
+    for kind, load in _loaders().items():
+        try:
+            load(path)
+        except GritsError:
+            continue
+        accepted.append(kind)
+    assert len(accepted) <= 1, f"{path} loads as {accepted}: a config is one kind"
+    if accepted:
+        return accepted[0]
+    load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(path)))  # raises naming the key
+    return "override"
+
+
+def _loader(path: Path):
+    from grits_lab.config import load_yaml
+    from grits_lab.evaluation.evaluation_config import load_evaluation_config
+
+    kind = _kind(path)
+    if kind == "override":
         return lambda p: load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(p)))
-    if name.startswith("dp_branches_brim_"):  # an override of the branch study (another plan), merged onto it
-        return lambda p: load_evaluation_config(STUDIES / "outcome_sensitivity" / "configs" / "dp_branches_brim.yaml", dict(load_yaml(p)))
-    if name.startswith("dp_rollouts_brim_"):  # an override of the brim rollouts (more trials), merged onto them
-        return lambda p: load_evaluation_config(STUDIES / "brim_guidance" / "configs" / "dp_rollouts_brim.yaml", dict(load_yaml(p)))
-    if name.startswith("policy"):
-        return load_train_config
-    if name.startswith("bc"):
-        return load_bc_config
-    if name.startswith("predictor"):
-        return lambda p: load_config(p, PredictorConfig)
-    raise AssertionError(f"no loader known for {path}")
+    return _loaders()[kind]
 
 
 @pytest.mark.parametrize("path", SHIPPED + sorted((ROOT / "sweeps").glob("*.yaml")), ids=lambda p: f"{p.parent.name}/{p.name}")
@@ -114,10 +128,10 @@ def _stage_configs_with_a_sim_block() -> list[tuple[Path, str]]:
 
     out = []
     for path in SHIPPED:
-        data = load_yaml(path)
-        if path.name.startswith("evaluate") or data.get("kind") in ("demos", "spillage"):
+        kind = _kind(path)
+        if kind in ("evaluation", "collect"):
             out.append((path, "sim"))
-        elif path.name.startswith("policy"):
+        elif kind == "policy":
             out.append((path, "rollout.sim"))
     return out
 
@@ -154,8 +168,8 @@ def test_datasets_collected_before_are_recognized_by_their_config_or_refused_by_
     from grits_lab.data.format import MANIFEST_FILE
     from grits_lab.errors import ConfigError, StorageError
 
-    stored = {"demos.yaml": "44337bd0841efe53", "demos_cpu.yaml": "66784ff117cfd6ad", "demos_quick.yaml": "deaee82b43f607c7",
-              "spillage.yaml": "e6847f2aed697ab6", "spillage_cpu.yaml": "e572800d4c39c388", "spillage_quick.yaml": "4e44dd76c6349ce0"}
+    stored = {"demos_paper.yaml": "44337bd0841efe53", "demos_cpu.yaml": "66784ff117cfd6ad", "demos_quick.yaml": "deaee82b43f607c7",
+              "spillage_paper.yaml": "e6847f2aed697ab6", "spillage_cpu.yaml": "e572800d4c39c388", "spillage_quick.yaml": "4e44dd76c6349ce0"}
     for name, fingerprint in stored.items():
         config = load_collect_config(ROOT / "experiments" / name)
         assert config.identity()["sim"] == {}
@@ -191,7 +205,7 @@ def test_an_evaluation_config_with_a_sim_override_round_trips_through_its_yaml_f
 
 
 @pytest.mark.parametrize("name, count, digest", [
-    ("evaluate.yaml", 100, "7bccbf48c17cd090"),
+    ("evaluate_paper.yaml", 100, "7bccbf48c17cd090"),
     ("evaluate_cpu.yaml", 100, "7bccbf48c17cd090"),
     ("evaluate_quick.yaml", 10, "33fb0e54b82bec26"),
 ])

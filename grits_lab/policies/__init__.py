@@ -6,14 +6,17 @@ this package exports what every controller and the training loop agree on
 """
 
 from grits_lab.policies.control import (
+    NO_HOOK_COLUMNS,
     Chunk,
     Controller,
     RolloutSettings,
     Rollouts,
     RolloutsFactory,
+    ScoopHook,
     ScoopSettings,
     is_still,
     rollout_episodes,
 )
 
-__all__ = ["Chunk", "Controller", "RolloutSettings", "Rollouts", "RolloutsFactory", "ScoopSettings", "is_still", "rollout_episodes"]
+__all__ = ["NO_HOOK_COLUMNS", "Chunk", "Controller", "RolloutSettings", "Rollouts", "RolloutsFactory", "ScoopHook", "ScoopSettings",
+           "is_still", "rollout_episodes"]

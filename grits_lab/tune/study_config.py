@@ -24,6 +24,15 @@ if TYPE_CHECKING:
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
 
+# Evaluation configs that moved (a preset renamed to its tier, a study's config into studies/), under
+# the path every stored study's identity hashed: a sweep that names the new path keeps resuming the
+# studies it stored before the move.
+IDENTITY_CONFIG_PATHS = {
+    "experiments/evaluate_paper.yaml": "experiments/evaluate.yaml",
+    "studies/brim_guidance/configs/evaluate_cpu_brim.yaml": "experiments/evaluate_cpu_brim.yaml",
+}
+
+
 @dataclass(frozen=True)
 class FloatRangeConfig:
     """Search range of a float parameter; `log` samples uniformly in log space (needs low > 0)."""
@@ -267,6 +276,7 @@ class StudyConfig:
         block = config_to_dict(self.evaluation)
         if not block["overrides"]:
             del block["overrides"]
+        block["config"] = IDENTITY_CONFIG_PATHS.get(str(block["config"]), block["config"])
         return block
 
     def food_library(self) -> "FoodLibrary":

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from grits_lab.errors import InputError
-from grits_lab.policies.control import ScoopHook
+from grits_lab.policies import ScoopHook
 from grits_lab.seeding import derive_seed
 
 

@@ -137,7 +137,7 @@ def load_study_config_from(sweep: dict, tmp_path):
 @pytest.mark.parametrize("stage, overrides, fragment", [
     ("policy", {"policy": {"unet": {"down_dimz": [32, 64]}}},
      "stage `policy` (experiments/policy_paper.yaml with its overrides): unknown key `policy.unet.down_dimz`"),
-    ("evaluate", {"foods": ["sagoo"]}, "stage `evaluate` (experiments/evaluate.yaml with its overrides): `foods` names 'sagoo'"),
+    ("evaluate", {"foods": ["sagoo"]}, "stage `evaluate` (experiments/evaluate_paper.yaml with its overrides): `foods` names 'sagoo'"),
     ("sweep", {"validation": {"foods": ["sagoo"]}}, "`validation.foods` names 'sagoo'"),
     ("sweep", {"evaluation": {"overrides": {"guidance": {"stepp": "normalized"}}}}, "guidance.stepp"),
 ])

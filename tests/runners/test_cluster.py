@@ -329,10 +329,10 @@ def test_the_cluster_steps_run_as_written_from_a_fresh_home(tmp_path, postgres_u
     from tests.tune.test_workers import assert_shared_study, load_trials
 
     small_configs = {
-        "experiments/spillage.yaml": _collect_config(tmp_path, None, episodes=6),
-        "experiments/evaluate.yaml": tmp_path / "evaluate.yaml",
+        "experiments/spillage_paper.yaml": _collect_config(tmp_path, None, episodes=6),
+        "experiments/evaluate_paper.yaml": tmp_path / "evaluate.yaml",
     }
-    small_configs["experiments/evaluate.yaml"].write_text(yaml.safe_dump({
+    small_configs["experiments/evaluate_paper.yaml"].write_text(yaml.safe_dump({
         "run_id": "cluster", "output_dir": str(tmp_path / "evaluate"), "methods": ["rule_based"],
         "foods": ["chocolate_balls"], "levels": ["low"], "trials": 6, "cloud": {"n_points": 64, "cad_surface_samples": 400},
         "scoop": {"max_steps": 36, "min_steps": 12}, "transfer": {"pour_steps": 8, "settle_steps": 5},

@@ -1,0 +1,8 @@
+"""`python -m studies.post_scoop_losses [--run]`: this study's committed commands (README.md, "Commands"), printed or run."""
+
+import sys
+
+from studies.commands import main
+
+if __name__ == "__main__":
+    sys.exit(main("post_scoop_losses"))
