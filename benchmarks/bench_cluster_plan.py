@@ -7,8 +7,8 @@ benchmarks/results/cluster_plan.json) and its tables beside it (cluster_plan.md)
 1. `recorded_episodes`: wall seconds per evaluation episode inside a worker (one worker per core),
    per method and quantity level (brim included) and per food and level, read from every committed
    `episodes.csv` (studies/*/summaries/*, docs/archive/*; column `wall_time_s`).
-2. `fresh`: measured now, on this machine: one evaluation episode per level (low, high, brim) of
-   the scripted expert and the rule-based method (`grits-lab evaluate --serial`, CPU seconds of that
+2. `fresh`: measured now, on this machine: one evaluation episode per level (low, high: the brim
+   level is a study's override, its cost is in the records) of the scripted expert and the rule-based method (`grits-lab evaluate --serial`, CPU seconds of that
    process from getrusage, start-up included); `--spillage-trials` spillage candidate trials of
    `--spillage-config` in this process (CPU seconds each, `time.process_time`); policy training
    steps/s of the cpu and paper presets (`bench_policy.py`, one thread).
@@ -81,7 +81,7 @@ def fresh_evaluation(food: str, methods: list[str]) -> dict:
 
     with tempfile.TemporaryDirectory(prefix="cluster_plan_") as tmp:
         override = Path(tmp) / "override.yaml"
-        override.write_text(yaml.safe_dump({"foods": [food], "levels": ["low", "high", "brim"], "trials": 1}))
+        override.write_text(yaml.safe_dump({"foods": [food], "levels": ["low", "high"], "trials": 1}))
         out = Path(tmp) / "run"
         command = [sys.executable, "-m", "grits_lab.cli", "evaluate", "experiments/evaluate_cpu.yaml", "--serial", "--no-progress",
                    "--methods", *methods, "--override", str(override), "--output-dir", str(out)]
@@ -127,6 +127,12 @@ def fresh_spillage(config_path: str, trials: int) -> dict:
             "wall_s": [round(w, 2) for w in wall], "cpu_s_per_trial": round(sum(steady) / len(steady), 2)}
 
 
+def load_policy_max_steps(preset: str) -> int:
+    from grits_lab.config import load_yaml
+
+    return int(load_yaml(str(ROOT / f"experiments/policy_{preset}.yaml"))["max_steps"])
+
+
 def fresh_training(preset: str, steps: int, timeout_s: float) -> dict:
     """Policy training steps/s of a preset on one thread (bench_policy.py)."""
     command = [sys.executable, str(HERE / "bench_policy.py"), "--preset", preset, "--repeats", "1", "--train-steps", str(steps), "--threads", "1"]
@@ -137,9 +143,7 @@ def fresh_training(preset: str, steps: int, timeout_s: float) -> dict:
     if proc.returncode != 0:
         return {"status": "failed", "error": "\n".join((proc.stderr or proc.stdout).strip().splitlines()[-3:])}
     result = json.loads(proc.stdout[proc.stdout.index("{"):])
-    from grits_lab.config import load_yaml
-
-    max_steps = int(load_yaml(f"experiments/policy_{preset}.yaml")["max_steps"])
+    max_steps = load_policy_max_steps(preset)
     return {"status": "ok", "preset": preset, "train_steps_per_s": result["train_steps_per_s"], "max_steps": max_steps,
             "parameters_M": result["parameters_M"], "training_s": round(max_steps / result["train_steps_per_s"], 1)}
 
@@ -217,13 +221,14 @@ def plan(args: argparse.Namespace, report: dict) -> dict:
         return (sum(values) / len(values) if values else float("nan")), source
 
     costs = {m: method_cost(m) for m in PAPER_METHODS}
-    eval_cost = sum(c for c, _ in costs.values()) / len(costs)
+    known = [c for c, _ in costs.values() if c == c]  # a method with neither records nor a fresh episode is left out
+    eval_cost = sum(known) / len(known)
     evaluation = fresh.get("evaluation", {})
     expert = [v for k, v in evaluation.get("episodes", {}).items() if k.startswith("expert/")]
     demo_cost = sum(expert) / len(expert) if expert else float("nan")
     spill_cost = fresh.get("spillage", {}).get("cpu_s_per_trial", float("nan"))
     training = {p: fresh.get(f"training_{p}", {}) for p in ("cpu", "paper")}
-    train_s = training["paper"].get("training_s") or float("nan")
+    train_s = training["cpu"].get("training_s") or float("nan")
     rows = report["ray_overhead"]
     table = {}
     for cores in args.cores:
@@ -236,21 +241,29 @@ def plan(args: argparse.Namespace, report: dict) -> dict:
         # a sweep trial's episodes run in parallel; several sweep processes share one storage
         per_trial = min(cores, args.sweep_episodes)
         processes = max(1, cores // args.sweep_episodes)
-        trial = parallel_stage(args.sweep_episodes, costs["grits"][0], per_trial, over)
+        # each sweep process keeps one pool of per_trial workers for all its trials (bench_sweep_pool.py)
+        small = _pick(rows, per_trial)
+        trial = parallel_stage(args.sweep_episodes, costs["grits"][0], per_trial, small)
         rounds = math.ceil(args.sweep_trials / processes)
         stages["sweep"] = {"trials": args.sweep_trials, "sweep_processes": processes, "rounds": rounds,
-                           "wall_s": round(rounds * trial["wall_s"], 1),
+                           "wall_s": round(rounds * (trial["wall_s"] - small["pool_start_up_s"]) + small["pool_start_up_s"], 1),
                            "limited_by": "trials" if processes >= args.sweep_trials else "cores"}
-        stages["policy_training"] = {"wall_s": train_s, "limited_by": "serial (one process)"}
+        stages["policy_training"] = {"wall_s": train_s, "limited_by": "serial, cpu preset"}
         simulated = sum(s["wall_s"] for k, s in stages.items() if k != "policy_training")
         table[str(cores)] = {"stages": stages, "simulation_wall_s": round(simulated, 1),
                              "total_wall_s": round(simulated + train_s, 1), "overhead_row_workers": over["workers"]}
     # the driver keeps up while workers x its CPU per task < one episode's cost
-    driver_limit = {str(r["workers"]): round(eval_cost / r["driver_cpu_per_task_s"]) if r["driver_cpu_per_task_s"] > 0 else None for r in rows}
+    driver_limit = {str(r["workers"]): round(eval_cost / r["driver_cpu_per_task_s"]) if r["driver_cpu_per_task_s"] > 0 and eval_cost == eval_cost else None for r in rows}
     return {"per_episode_cost_s": {"evaluation_mean_over_8_methods": round(eval_cost, 2),
                                    "by_method": {m: {"s": round(c, 2), "from": s} for m, (c, s) in costs.items()},
                                    "demo (scripted expert, fresh)": round(demo_cost, 2), "spillage_trial (fresh)": spill_cost},
             "policy_training_s": {p: t.get("training_s") for p, t in training.items()},
+            # a preset whose steps outlast the measurement's timeout: each step took longer than timeout / (steps + warm-up)
+            "policy_training_s_at_least": {p: round(int(load_policy_max_steps(p)) * t["timeout_s"] / (args.train_steps + 1))
+                                           for p, t in training.items() if t.get("status") == "timeout"},
+            # past this many cores a stage runs in one round: more cores no longer shorten it
+            "one_round_at_cores": {"demos": args.demos, "spillage": args.spillage_trials_total, "evaluation": args.eval_episodes,
+                                   "sweep": args.sweep_trials * args.sweep_episodes},
             "by_cores": table, "workers_one_driver_keeps_busy": driver_limit}
 
 
@@ -275,7 +288,10 @@ def markdown(report: dict) -> str:
     lines += ["", "Per-episode cost (s): evaluation mean over the 8 methods "
               f"{cost['evaluation_mean_over_8_methods']}, demo {cost['demo (scripted expert, fresh)']}, "
               f"spillage trial {cost['spillage_trial (fresh)']}; policy training (s, one CPU thread): "
-              + ", ".join(f"{p} preset {t}" for p, t in plan["policy_training_s"].items()) + ".", "",
+              + ", ".join(f"{p} preset {t}" for p, t in plan["policy_training_s"].items() if t)
+              + "".join(f"; {p} preset at least {t} (its steps outlasted the measurement)" for p, t in plan["policy_training_s_at_least"].items())
+              + ". A stage runs in one round from as many cores as it has episodes: "
+              + ", ".join(f"{k} {n}" for k, n in plan["one_round_at_cores"].items()) + ".", "",
               "Ray and the driver, probe tasks of known duration:", "",
               "| workers | pool start-up (s) | makespan - ideal (s) | dispatch overhead per task (s) | driver CPU per task (s) | memory per worker (MB) |",
               "|---:|---:|---:|---:|---:|---:|"]
@@ -322,7 +338,7 @@ def main() -> int:
     args = parser.parse_args()
     output = Path(args.output)
     old = json.loads(output.read_text()) if output.exists() else {}
-    if (args.skip_fresh and "fresh" not in old) or (args.skip_ray and "ray_overhead" not in old):
+    if (args.skip_fresh and not old.get("fresh")) or (args.skip_ray and not old.get("ray_overhead")):
         print(f"{output}: no earlier fresh or ray_overhead part to keep; run without --skip-*", file=sys.stderr)
         return 2
 
@@ -340,6 +356,10 @@ def main() -> int:
         for preset in ("cpu", "paper"):
             print(f"fresh: policy training, {preset} preset", file=sys.stderr, flush=True)
             report["fresh"][f"training_{preset}"] = fresh_training(preset, args.train_steps, args.train_timeout)
+    from grits_lab.io import write_text_atomic
+
+    output.parent.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(output, json.dumps({**old, **report}, indent=2, default=str) + "\n")  # kept if a later part fails
     if args.skip_ray:
         report["ray_overhead"], report["ray_notes"] = old["ray_overhead"], old.get("ray_notes", [])
     else:
@@ -359,10 +379,9 @@ def main() -> int:
             rss_gb = rss_gb or max(row["memory_taken_per_worker_mb"], 1.0) / 1024
             rows.append(row)
         report["ray_overhead"], report["ray_notes"] = rows, notes
+    write_text_atomic(output, json.dumps(report, indent=2, default=str) + "\n")
     report["plan"] = plan(args, report)
     report["not_measured"] = NOT_MEASURED
-    output.parent.mkdir(parents=True, exist_ok=True)
-    from grits_lab.io import write_text_atomic
 
     write_text_atomic(output, json.dumps(report, indent=2, default=str) + "\n")
     write_text_atomic(output.with_suffix(".md"), markdown(report))
