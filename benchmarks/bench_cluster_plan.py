@@ -271,6 +271,11 @@ def _hours(seconds: float | None) -> str:
     return "n/a" if seconds is None or seconds != seconds else f"{seconds / 3600:.2f}"
 
 
+def _share(report: dict) -> str:
+    ev = report.get("fresh", {}).get("evaluation", {})
+    return f"{ev['process_cpu_s'] / ev['process_wall_s']:.0%}" if ev.get("status") == "ok" else "n/a"
+
+
 def markdown(report: dict) -> str:
     """The plan and its measurements as a page (benchmarks/results/cluster_plan.md)."""
     plan, m = report["plan"], report["machine"]
@@ -292,6 +297,9 @@ def markdown(report: dict) -> str:
               + "".join(f"; {p} preset at least {t} (its steps outlasted the measurement)" for p, t in plan["policy_training_s_at_least"].items())
               + ". A stage runs in one round from as many cores as it has episodes: "
               + ", ".join(f"{k} {n}" for k, n in plan["one_round_at_cores"].items()) + ".", "",
+              "Episode costs are wall seconds inside a worker, recorded or fresh, on this shared machine: upper "
+              "bounds of a dedicated core's time (the fresh evaluation's process ran "
+              f"{_share(report)} of its wall time on a CPU).", "",
               "Ray and the driver, probe tasks of known duration:", "",
               "| workers | pool start-up (s) | makespan - ideal (s) | dispatch overhead per task (s) | driver CPU per task (s) | memory per worker (MB) |",
               "|---:|---:|---:|---:|---:|---:|"]
@@ -346,6 +354,8 @@ def main() -> int:
                     "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
                                 "load_average_1min_at_start": round(os.getloadavg()[0], 2), "memory_available_gb_at_start": round(available_gb(), 1)},
                     "recorded_episodes": recorded_episodes()}
+    if args.skip_fresh and args.skip_ray:  # a re-rendered plan keeps the date and machine of its measurements
+        report["date"], report["machine"] = old.get("date", report["date"]), old.get("machine", report["machine"])
     if args.skip_fresh:
         report["fresh"] = old["fresh"]
     else:
