@@ -36,3 +36,14 @@ def test_the_transfer_ik_benchmark_gets_its_headline_ratios():
     rows = dict(run_all.headlines("transfer_ik", result))
     assert rows["transfer IK from the wound wrist: heading_free (x PyBullet's solve)"] == 10.4
     assert len(rows) == 4
+
+
+def test_the_cluster_plan_takes_rounds_of_episodes_or_the_drivers_serial_time():
+    parallel_stage = _module("bench_cluster_plan").parallel_stage
+    over = {"dispatch_overhead_per_task_s": 0.5, "driver_cpu_per_task_s": 0.01, "pool_start_up_s": 10.0}
+    # 800 episodes of 30 s on 256 cores: 4 rounds of 30.5 s, then start-up
+    assert parallel_stage(800, 30.0, 256, over) == {"episodes": 800, "rounds": 4, "wall_s": 132.0, "limited_by": "cores"}
+    assert parallel_stage(100, 30.0, 256, over)["limited_by"] == "episodes"
+    # a driver needing 1 s per task cannot feed 256 workers of 30 s episodes: its 800 s are the stage
+    slow = {**over, "driver_cpu_per_task_s": 1.0}
+    assert parallel_stage(800, 30.0, 256, slow) == {"episodes": 800, "rounds": 4, "wall_s": 810.0, "limited_by": "driver"}
