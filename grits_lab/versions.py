@@ -78,7 +78,7 @@ def cpu_kernels() -> str:
     NumPy, OpenBLAS and torch each pick kernels for the CPU at run time (NPY_DISABLE_CPU_FEATURES,
     OPENBLAS_CORETYPE and ATEN_CPU_CAPABILITY override the pick), and kernels of different widths
     round differently in the last bits. Contact amplifies those bits into another episode
-    (docs/evaluation.md "Outcome sensitivity"), so two records of one seed with different labels
+    (studies/outcome_sensitivity/README.md), so two records of one seed with different labels
     are not expected to be equal, and a replay on other kernels is not expected to match. Imports
     torch (once per process) so that the label is the same whatever the process ran before.
     """

@@ -354,7 +354,7 @@ def setting_table(episodes: pd.DataFrame) -> ReportTable:
 # Why a task failed, by the stage that ended it (grits_lab/evaluation/task_episode.py): each
 # episode falls in exactly one of these, in this order.
 # A joint moving more than this in one 0.1 s action is the IK leaving for another arm posture:
-# reachable transfers measured at most 0.40 rad, the flips 0.5-1.8 rad (docs/history.md).
+# reachable transfers measured at most 0.40 rad, the flips 0.5-1.8 rad (docs/archive/notes/history.md).
 POSTURE_FLIP_RAD = 0.5
 
 FAILURE_STAGES = (

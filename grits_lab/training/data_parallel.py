@@ -2,7 +2,7 @@
 
 A small network's training step does not speed up with more intra-op threads on a CPU (the
 diffusion policy's cpu preset: 150 steps at batch 64 take 26.9 s on one thread and 26.3 s on two,
-docs/history.md), but two processes that each take half of every batch run side by side on two
+docs/archive/notes/history.md), but two processes that each take half of every batch run side by side on two
 cores. Every process holds the same weights; after each backward pass one all-reduce sums the
 gradients, each weighted by its share of the batch, so every process applies the gradient of the
 mean loss over the whole batch, as a single process would.
