@@ -32,6 +32,10 @@ def _loader(path: Path):
         return load_collect_config
     if name.startswith("evaluate") or "methods" in data:
         return load_evaluation_config
+    if "settings" in data and "evaluation" in data:  # the scoop convergence study: its settings' evaluations load too
+        from studies.scoop_convergence.convergence import evaluation_configs, load_convergence_config
+
+        return lambda p: evaluation_configs(load_convergence_config(p), ROOT / "results" / "unused")
     if name.startswith(("transfer_", "sim_", "scoop_", "guide_")):  # an override of the transfer, the world, the scoop or the guide, merged onto the protocol
         return lambda p: load_evaluation_config(ROOT / "experiments" / "evaluate_cpu.yaml", dict(load_yaml(p)))
     if name.startswith("dp_branches_brim_"):  # an override of the branch study (another plan), merged onto it
