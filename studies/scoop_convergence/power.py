@@ -140,9 +140,13 @@ def power_table(counts: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
         p_dp = rows["dp"].sum() / paired
         discordance = (rows["only_dp"].sum() + rows["only_grits"].sum()) / paired
         measured = rows["grits"].sum() / rows["dp"].sum()
+        _, within = log_ratio_and_variance(int(rows["grits"].sum()), int(rows["dp"].sum()), int(rows["only_dp"].sum()),
+                                           int(rows["only_grits"].sum()))
+        sd = math.sqrt(within + tau_raw * tau_raw / len(rows))  # the committed chains' own interval, at the raw spread
         inputs.append({"level": level, "chains": len(rows), "paired": paired, "dp": int(rows["dp"].sum()),
                        "grits": int(rows["grits"].sum()), "p_dp": p_dp, "discordance": discordance,
-                       "measured_ratio": measured, "tau_dl": tau_dl, "tau_raw": tau_raw})
+                       "measured_ratio": measured,
+                       "ratio_low": measured * math.exp(-Z_95 * sd), "ratio_high": measured * math.exp(Z_95 * sd), "tau_dl": tau_dl, "tau_raw": tau_raw})
         for truth, ratio in (("measured", measured), ("paper", PAPER_RATIO)):
             if discordance < abs(ratio - 1.0) * p_dp:
                 continue  # no paired distribution has this discordance at that ratio
@@ -162,10 +166,12 @@ def power_markdown(inputs: pd.DataFrame, designs: pd.DataFrame) -> str:
              "(studies/scoop_convergence/power.py states the model). Decided: the 95 % interval of the pooled "
              f"GRITS/DP spill ratio during the scoop excludes {PAPER_RATIO:g} or excludes 1, with probability "
              f"{TARGET_POWER:g}.", "", "## Measured inputs", ""]
-    body = [[r.level, str(r.chains), str(r.paired), f"{r.grits} / {r.dp}", f"{r.measured_ratio:.3f}", f"{r.p_dp:.3f}",
+    body = [[r.level, str(r.chains), str(r.paired), f"{r.grits} / {r.dp}",
+             f"{r.measured_ratio:.3f} [{r.ratio_low:.3f}, {r.ratio_high:.3f}]", f"{r.p_dp:.3f}",
              f"{r.discordance:.3f}", f"{r.tau_dl:.3f}", f"{r.tau_raw:.3f}"] for r in inputs.itertuples()]
-    lines += [markdown_table(["Level", "Chains", "Paired seeds", "GRITS / DP spills", "Pooled ratio", "DP rate",
+    lines += [markdown_table(["Level", "Chains", "Paired seeds", "GRITS / DP spills", "Pooled ratio [95 %, model]", "DP rate",
                               "Discordance", "tau (DL, brim)", "tau (raw, brim)"], body), ""]
+    lines += ["The pooled ratio's interval is the model's (below) on the committed chains, at the raw chain spread.", ""]
     lines += ["Sources: " + ", ".join(f"`{run.summary}/paired.csv` ({run.level}, {run.chain} chain, `{run.method}`)"
                                        for run in CHAINS) + ".", "", "## Seeds per chain for P(decided) >= "
               f"{TARGET_POWER:g}", ""]
@@ -173,7 +179,27 @@ def power_markdown(inputs: pd.DataFrame, designs: pd.DataFrame) -> str:
              *("never" if pd.isna(r[f"seeds_k{k}"]) else str(int(r[f"seeds_k{k}"])) for k in CHAIN_COUNTS)]
             for _, r in designs.iterrows()]
     lines += [markdown_table(["Level", "True ratio", "tau", *(f"K = {k}" for k in CHAIN_COUNTS)], body), ""]
+    lines += ["## Reading", ""]
+    for level, rows in designs.groupby("level", sort=False):
+        raw = rows[rows["tau_kind"] == "raw"].set_index("truth")
+        have = inputs[inputs["level"] == level].iloc[0]
+        cells = [f"{_seeds(raw.loc[t, f'seeds_k{MIN_CHAINS}'])} seeds per chain if GRITS/DP truly is {raw.loc[t, 'ratio']:.3f} ({t})"
+                 for t in raw.index]
+        lines.append(f"- {level}: {MIN_CHAINS} chains (the fewest whose spread an interval can carry) need "
+                     f"{' and '.join(cells)}, at the raw chain spread; the committed runs hold {have.chains} chains of "
+                     f"{have.paired // have.chains} paired seeds.")
+    lines += ["", "Limits: the interval is the normal approximation on the log ratio, rough below about 30 spills per "
+              "method; tau is taken as known, estimated from two chains (with K chains a bootstrap over chains sees "
+              "K - 1 degrees of freedom of it: two chains cannot carry it, hence at least three); DP's rate and the "
+              "discordance are taken as the same in every chain.", ""]
     return "\n".join(lines)
+
+
+MIN_CHAINS = 3  # the fewest chains whose spread a bootstrap over chains can estimate at all (issue: >= 3 chains)
+
+
+def _seeds(value: float) -> str:
+    return "never enough" if pd.isna(value) else str(int(value))
 
 
 def power_report(summary_to: str | Path | None = None) -> str:
