@@ -41,7 +41,7 @@ RATES = {
     "spillage": "spill during the scoop",
     "over_rim": "lost over the rim",
     "off_spoon": "lost off the spoon",
-    "nudge_change": "outcome changed by the nudge",
+    "nudge_change": "changed by the nudge",
 }
 
 
@@ -145,7 +145,12 @@ def run_study(config: ConvergenceConfig, output_dir: str | Path, overrides: dict
     import yaml
 
     from grits_lab.config import config_to_dict
+    from grits_lab.evaluation.methods import method_checkpoints
     from grits_lab.io import ensure_writable_dir, write_text_atomic
+
+    for _, _, evaluation, _ in runs[:1]:  # every run has the same methods and checkpoints: a missing one before any work
+        for method in evaluation.methods:
+            method_checkpoints(method, evaluation.checkpoints)
 
     out = ensure_writable_dir(output_dir)
     recorded = out / STUDY_FILE
@@ -228,8 +233,12 @@ def setting_rows(plain: pd.DataFrame, nudged: list[pd.DataFrame]) -> list[dict[s
     return rows
 
 
+ALL_LEVELS = "all"  # the `level` of a row that pools every level; the choice reads these rows
+
+
 def convergence_table(output_dir: str | Path) -> tuple[pd.DataFrame, ConvergenceConfig]:
-    """The summary's table: one row per (setting, method), settings in the config's order."""
+    """The summary's table: one row per (setting, level, method), settings in the config's order, the
+    levels pooled (`ALL_LEVELS`) first and then each level when the records hold several."""
     runs = study_runs(output_dir)
     config = config_from_dict(ConvergenceConfig, load_yaml(Path(output_dir) / STUDY_FILE))
     rows = []
@@ -237,9 +246,12 @@ def convergence_table(output_dir: str | Path) -> tuple[pd.DataFrame, Convergence
         setting = config.settings[name]
         plain = _episodes(variants[PLAIN])
         nudged = [_episodes(path) for v, path in variants.items() if v != PLAIN]
-        for row in setting_rows(plain, nudged):
-            rows.append({"setting": name, "time_step": setting.time_step, "solver_iterations": setting.solver_iterations,
-                         "nudge_draws": len(nudged), **row})
+        levels = [ALL_LEVELS, *dict.fromkeys(plain["level"])]
+        for level in levels:
+            mine = (lambda f: f) if level == ALL_LEVELS else (lambda f, lv=level: f[f["level"] == lv])
+            for row in setting_rows(mine(plain), [mine(f) for f in nudged]):
+                rows.append({"setting": name, "time_step": setting.time_step, "solver_iterations": setting.solver_iterations,
+                             "nudge_draws": len(nudged), "level": level, **row})
     return pd.DataFrame(rows), config
 
 
@@ -283,7 +295,7 @@ def choose(table: pd.DataFrame, settings: list[str], method: str, max_half_width
     `method` each lie within the reference's Wilson interval; a rate with no episodes on either side
     (no nudged run yet) is not compared. Decided when every reference interval with episodes has a half
     width of at most `max_half_width` and every rate has been measured at the reference."""
-    rows = {r["setting"]: r for _, r in table[table["method"] == method].iterrows()}
+    rows = {r["setting"]: r for _, r in table[(table["method"] == method) & (table["level"] == ALL_LEVELS)].iterrows()}
     reference = settings[-1]
     if reference not in rows:
         return Choice(method, reference, None, {}, False, 0, "spillage")
@@ -315,12 +327,13 @@ def summary_markdown(table: pd.DataFrame, config: ConvergenceConfig, output_dir:
              "paired episodes whose spill during the scoop differs from the plain run's. Wall time is per episode on the "
              "machine that ran it.", ""]
     for method in dict.fromkeys(table["method"]):
-        rows = table[table["method"] == method]
-        header = ["Setting", "Episodes", *RATES.values(), "Spilled (sum, mean)", "Scooped (sum, mean)",
+        mine = table[table["method"] == method]
+        rows = pd.concat([mine[mine["level"] == level] for level in dict.fromkeys(mine["level"])])  # by level, then setting
+        header = ["Setting", "Level", "Episodes", *(name.capitalize() for name in RATES.values()), "Spilled (sum, mean)", "Scooped (sum, mean)",
                   "Over rim / off spoon particles", "Wall s"]
         body = []
         for _, r in rows.iterrows():
-            body.append([f"{r['setting']} ({1 / r['time_step']:.0f} Hz, {r['solver_iterations']} it.)", str(r["episodes"]),
+            body.append([f"{r['setting']} ({1 / r['time_step']:.0f} Hz, {r['solver_iterations']} it.)", r["level"], str(r["episodes"]),
                          *(format_rate(_rate_of(r, key)) for key in RATES),
                          f"{r['spilled_sum']}, {r['spilled_mean']:.2f}", f"{r['scooped_sum']}, {r['scooped_mean']:.1f}",
                          f"{r['spilled_scoop_over_rim_sum']} / {r['spilled_scoop_off_spoon_sum']}", f"{r['wall_time_s_mean']:.1f}"])

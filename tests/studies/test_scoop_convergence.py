@@ -72,7 +72,9 @@ def test_a_coarse_setting_within_every_interval_is_chosen_and_the_summary_is_wri
     text = (tmp_path / "summary" / "README.md").read_text()
     assert "**coarse**" in text and "middle: spill during the scoop, lost over the rim, lost off the spoon outside" in text
     written = pd.read_csv(tmp_path / "summary" / "convergence.csv")
-    assert list(written["setting"]) == ["coarse", "middle", "fine"]
+    assert list(written["setting"]) == ["coarse", "coarse", "middle", "middle", "fine", "fine"]
+    assert list(written["level"]) == ["all", "brim"] * 3
+    assert (written["spillage_k"].iloc[::2].to_numpy() == written["spillage_k"].iloc[1::2].to_numpy()).all()  # one level: all = brim
 
 
 def test_bad_input_is_one_line_and_exit_2_before_any_work(tmp_path, capsys):
@@ -91,6 +93,8 @@ def test_bad_input_is_one_line_and_exit_2_before_any_work(tmp_path, capsys):
                                       "settings": SETTINGS}))  # sorted by name: fine before middle
     assert main(["run", str(config), "--output-dir", str(tmp_path / "out")]) == 2
     assert "coarsest first" in capsys.readouterr().err and not (tmp_path / "out").exists()
+    assert main(["run", shipped, "--output-dir", str(tmp_path / "out"), "--methods", "expert", "dp"]) == 2
+    assert "policy" in capsys.readouterr().err and not (tmp_path / "out").exists()
 
 
 def test_one_tiny_real_scoop_at_the_coarse_setting_is_summarized_without_a_choice(models, tmp_path):
@@ -110,7 +114,8 @@ def test_one_tiny_real_scoop_at_the_coarse_setting_is_summarized_without_a_choic
     assert main(["run", str(study), "--output-dir", str(out), "--settings", "coarse", "--no-progress"]) == 0  # resumed: nothing to play
     assert main(["summarize", str(out), "--summary-to", str(tmp_path / "summary")]) == 0
     table = pd.read_csv(tmp_path / "summary" / "convergence.csv")
-    assert list(table["setting"]) == ["coarse"] and table.iloc[0]["episodes"] == 1 and table.iloc[0]["nudge_change_n"] == 1
+    assert list(table["setting"]) == ["coarse"] * 2 and list(table["level"]) == ["all", "low"]
+    assert table.iloc[0]["episodes"] == 1 and table.iloc[0]["nudge_change_n"] == 1
     assert "the finest setting fine has no episodes" in (tmp_path / "summary" / "README.md").read_text()
 
 
