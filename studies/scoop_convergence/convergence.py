@@ -23,7 +23,7 @@ the framework's `evaluate` (resumable, records in episodes.parquet). `summarize`
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -122,8 +122,8 @@ def evaluation_configs(config: ConvergenceConfig, output_dir: str | Path, overri
             layer = merge_mappings(merged, {
                 "output_dir": str(Path(output_dir) / name / variant),
                 "sim": {"time_step": setting.time_step, "solver_iterations": setting.solver_iterations}})
-            layer["run_id"] = f"{merged.get('run_id', 'scoop_convergence')}_{name}_{variant}"
             evaluation = load_evaluation_config(config.evaluation, layer)
+            evaluation = replace(evaluation, run_id=f"{evaluation.run_id}_{name}_{variant}")
             if evaluation.transfer.enabled:
                 raise ConfigError(f"{config.evaluation}: `transfer.enabled` must be false: the study plays the scoop alone")
             runs.append((name, variant, evaluation, hook))
@@ -134,7 +134,12 @@ def run_study(config: ConvergenceConfig, output_dir: str | Path, overrides: dict
               progress: bool = True, only: list[str] | None = None) -> int:
     """Play (or resume) every run of the study under `output_dir`; `only`: these settings. Exit status 1
     when an episode failed (its error is in its records), else 0."""
+    import yaml
+
+    from grits_lab.config import config_to_dict
     from grits_lab.evaluation.evaluation_run import evaluate, failed_episodes_line
+    from grits_lab.evaluation.methods import method_checkpoints
+    from grits_lab.io import ensure_writable_dir, write_text_atomic
 
     runs = evaluation_configs(config, output_dir, overrides)
     if only:
@@ -142,12 +147,6 @@ def run_study(config: ConvergenceConfig, output_dir: str | Path, overrides: dict
         if unknown:
             raise InputError(f"--settings {' '.join(unknown)}: not a setting of the config (it has {', '.join(config.settings)})")
         runs = [r for r in runs if r[0] in only]
-    import yaml
-
-    from grits_lab.config import config_to_dict
-    from grits_lab.evaluation.methods import method_checkpoints
-    from grits_lab.io import ensure_writable_dir, write_text_atomic
-
     for _, _, evaluation, _ in runs[:1]:  # every run has the same methods and checkpoints: a missing one before any work
         for method in evaluation.methods:
             method_checkpoints(method, evaluation.checkpoints)
