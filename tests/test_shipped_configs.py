@@ -25,7 +25,14 @@ def _loaders() -> dict:
 
     return {"sweep": load_study_config, "pipeline": load_pipeline_config, "collect": load_collect_config,
             "evaluation": load_evaluation_config, "policy": load_train_config, "bc": load_bc_config,
-            "predictor": lambda p: load_config(p, PredictorConfig)}
+            "predictor": lambda p: load_config(p, PredictorConfig), "scoop_convergence": _convergence}
+
+
+def _convergence(path: Path):
+    """A scoop-convergence study config: its settings' evaluation configs load too."""
+    from studies.scoop_convergence.convergence import evaluation_configs, load_convergence_config
+
+    return evaluation_configs(load_convergence_config(path), ROOT / "results" / "unused")
 
 
 def _kind(path: Path) -> str:

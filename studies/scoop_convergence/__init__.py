@@ -1,0 +1,1 @@
+"""Does the scoop's physics converge? (README.md)"""
