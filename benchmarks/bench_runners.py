@@ -58,7 +58,7 @@ def main() -> None:
     ctx.close()
     assert all(r.ok for r in bare), [r.error for r in bare if not r.ok]
 
-    ray.init(num_cpus=2, include_dashboard=False, logging_level="WARNING")
+    ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level="WARNING")
     out = {}
     for workers in (1, 2):
         with RayExecutor(workers=workers) as ex:

@@ -14,7 +14,7 @@ pytestmark = pytest.mark.ray
 
 def test_a_worker_killed_during_evaluate_loses_and_duplicates_nothing(models, tmp_path, kill_a_worker_mid_episode):
     serial = evaluate(eval_config(models, tmp_path / "serial", methods=["rule_based"], trials=3), progress=False)
-    ray.init(num_cpus=2, include_dashboard=False)
+    ray.init(address="local", num_cpus=2, include_dashboard=False)
     try:
         config = eval_config(models, tmp_path / "ray", methods=["rule_based"], trials=3, executor={"backend": "ray", "workers": 2})
         parallel = evaluate(config, progress=False)

@@ -16,7 +16,7 @@ pytestmark = [pytest.mark.ray, pytest.mark.slow]  # about a minute: Ray start-up
 def test_ray_workers_give_the_serial_records(models, tmp_path):
     methods = ["dp", "grits"]
     serial = evaluate(eval_config(models, tmp_path / "serial", methods=methods, trials=2), progress=False)
-    ray.init(num_cpus=2, include_dashboard=False)
+    ray.init(address="local", num_cpus=2, include_dashboard=False)
     try:
         with RayExecutor(workers=2) as executor:
             parallel = evaluate(eval_config(models, tmp_path / "ray", methods=methods, trials=2), progress=False, executor=executor)
